@@ -1,0 +1,1 @@
+"""Swarm algorithms. Each module imports only ``swarmbox.api`` (and numpy/scipy)."""

@@ -1,0 +1,68 @@
+"""Formation flight (paper RQ2): a virtual leader flies a circle; every drone keeps its launch
+offset from the leader's launch point, rotated with the leader's heading.
+
+The ground computes the virtual leader's waypoint and heading every tick and streams it to its
+direct inferiors; a drone that has inferiors relays it to them, so the same code flies under every
+topology (centralized, leader-follower, chain, tree). Before ``start_s`` the ground sends code 0
+(hold above home); during the circle code 1 (follow); afterwards the leader point is the origin.
+
+Differences from the reference implementation: the offsets are taken relative to the leader's
+launch point (the reference used raw launch coordinates, the same thing when the leader launches
+at the origin), and the circle ends after exactly ``laps`` turns of 2π.
+"""
+
+import math
+
+from swarmbox.api import DroneAlgorithm, DroneContext, GroundAlgorithm, GroundContext, Setpoint, wrap_angle
+
+HOLD, FOLLOW = 0, 1
+
+
+class FormationGround(GroundAlgorithm):
+    def exec_loop(self, ctx: GroundContext) -> None:
+        p = ctx.params
+        r, alt = float(p["radius_m"]), float(p["altitude_m"])
+        theta = (ctx.stage_time_s - float(p["start_s"])) * float(p["angular_rate_rad_s"])
+        if theta < 0:
+            code, wp, yaw = HOLD, (0.0, 0.0, -alt), 0.0
+        elif theta < 2 * math.pi * float(p["laps"]):
+            code, wp, yaw = FOLLOW, (r * math.sin(theta), r * math.cos(theta) - r, -alt), wrap_angle(-theta)
+        else:
+            code, wp, yaw = FOLLOW, (0.0, 0.0, -alt), 0.0
+        for drone in ctx.reports:
+            ctx.send_task(drone, code=code, waypoint_ned_m=wp, yaw_rad=yaw, reliable=False)
+
+
+class FormationDrone(DroneAlgorithm):
+    def exec_once(self, ctx: DroneContext) -> None:
+        ln, le, _ = ctx.mission.initial_positions[int(ctx.params["leader"])]
+        hn, he, _ = ctx.home_ned_m
+        self.offset = (hn - ln, he - le)
+        self.next_mark_s = 0.0
+
+    def exec_loop(self, ctx: DroneContext) -> Setpoint:
+        task, alt = ctx.last_task, float(ctx.params["altitude_m"])
+        for drone in ctx.inferiors:  # relay the leader's waypoint down the hierarchy
+            if task is not None:
+                ctx.send_task(drone, code=task.code, waypoint_ned_m=task.waypoint_ned_m,
+                              yaw_rad=task.yaw_rad, data=task.data, reliable=False)
+        if task is None or task.code == HOLD or task.waypoint_ned_m is None:
+            n, e, _ = ctx.home_ned_m
+            return Setpoint.position(n, e, -alt, 0.0)
+        psi = task.yaw_rad or 0.0
+        c, s = math.cos(psi), math.sin(psi)
+        on, oe = self.offset
+        wn, we, wd = task.waypoint_ned_m
+        target = (wn + c * on - s * oe, we + s * on + c * oe, wd)
+        if ctx.stage_time_s >= self.next_mark_s:
+            self.next_mark_s = ctx.stage_time_s + 1.0
+            ctx.mark("formation_error", error_m=math.dist(ctx.pos_ned_m, target))
+        return Setpoint.position(*target, psi)
+
+    def exec_complete(self, ctx: DroneContext) -> bool:
+        p = ctx.params
+        if ctx.stage_time_s <= float(p["complete_after_s"]):
+            return False
+        tol = float(p["home_tolerance_m"])
+        (n, e, _), (hn, he, _) = ctx.pos_ned_m, ctx.home_ned_m
+        return abs(n - hn) < tol and abs(e - he) < tol

@@ -1,0 +1,84 @@
+"""The built-in scalar metrics: name, unit, which direction is better, one line of meaning.
+
+One table, read by the sweep tables (rank, paired comparison), the heatmap (darker = better) and
+``compare`` (what counts as a regression). Mission-specific metrics declared in ``algo.metrics`` add
+their own entries at analysis time (see :mod:`swarmbox.analysis.mission`).
+"""
+
+from __future__ import annotations
+
+from typing import Literal, NamedTuple
+
+Direction = Literal["lower", "higher"] | None
+
+
+class MetricInfo(NamedTuple):
+    unit: str
+    direction: Direction
+    doc: str
+
+
+BUILTIN: dict[str, MetricInfo] = {
+    # run
+    "sim_time_s": MetricInfo("s", None, "simulated (or flown) time of the whole run"),
+    "real_time_factor": MetricInfo("", "higher", "simulated time / wall time"),
+    # mission (paper Table 6)
+    "mission_duration_s": MetricInfo("s", "lower", "ground EXECUTION start -> ground's next stage"),
+    "distance_h_m_mean": MetricInfo("m", "lower", "mean over drones of horizontal path length"),
+    "distance_h_m_std": MetricInfo("m", "lower", "population std over drones of horizontal path length"),
+    "distance_h_m_total": MetricInfo("m", "lower", "sum over drones of horizontal path length"),
+    "distance_3d_m_mean": MetricInfo("m", "lower", "mean over drones of 3-D path length"),
+    "distance_3d_m_std": MetricInfo("m", "lower", "population std over drones of 3-D path length"),
+    "busy_s_mean": MetricInfo("s", None, "mean over drones of EXECUTION start -> own completion"),
+    "busy_s_std": MetricInfo("s", "lower", "population std over drones of busy time (workload deviation)"),
+    "utilization_mean": MetricInfo("", "higher", "mean over drones of busy / mission duration (0..1)"),
+    "utilization_std": MetricInfo("", "lower", "population std over drones of utilization"),
+    "idle_s_mean": MetricInfo("s", "lower", "mean over drones of mission duration - busy"),
+    "completed_fraction": MetricInfo("", "higher", "fraction of drones that reported completion"),
+    # network (EXECUTION, unified clock)
+    "latency_ms_mean": MetricInfo("ms", "lower", "mean one-way latency of delivered messages"),
+    "latency_ms_p50": MetricInfo("ms", "lower", "median one-way latency"),
+    "latency_ms_p95": MetricInfo("ms", "lower", "95th percentile one-way latency"),
+    "latency_ms_max": MetricInfo("ms", "lower", "largest one-way latency"),
+    "loss_ratio": MetricInfo("", "lower", "lost / sent over all links"),
+    "tx_bytes_per_s_mean": MetricInfo("B/s", "lower", "mean over agents of bytes sent per second"),
+    # estimation
+    "discrepancy_h_m_mean": MetricInfo("m", "lower", "mean over drones of mean |GNSS - estimate| (N, E)"),
+    "discrepancy_h_m_max": MetricInfo("m", "lower", "largest horizontal GNSS - estimate distance"),
+    # safety
+    "min_separation_m": MetricInfo("m", "higher", "smallest 3-D distance between two drones"),
+    "time_below_separation_s": MetricInfo("s", "lower", "time with some pair closer than the threshold"),
+    "collision_events": MetricInfo("", "lower", "collision events logged over the whole run"),
+    "safety_events": MetricInfo("", "lower", "safety-monitor interventions over the whole run"),
+    # swarm
+    "order_mean": MetricInfo("", None, "mean velocity alignment |sum v| / sum |v|"),
+    "connectivity_mean": MetricInfo("", "higher", "mean algebraic connectivity of the comm graph"),
+    "connectivity_min": MetricInfo("", "higher", "smallest algebraic connectivity of the comm graph"),
+    # diagnosis (first anomaly after the fault onset, any monitored metric)
+    "anomaly_t_f_s": MetricInfo("s", "lower", "time from fault onset to first anomaly (t_f)"),
+    "anomaly_tau_d": MetricInfo("", None, "metric value at t_f (tau_d)"),
+    "anomaly_sigma_a": MetricInfo("IQR", "higher", "distance beyond the fence at t_f (Sigma_a)"),
+    "anomaly_is_target": MetricInfo("", "higher", "1 if the first flagged drone is the fault target"),
+}
+
+#: Per monitored metric the diagnosis adds ``<m>_t_f_s``, ``<m>_tau_d``, ``<m>_sigma_a``, ``<m>_is_target``.
+_DIAG_SUFFIX: dict[str, Direction] = {
+    "_t_f_s": "lower", "_tau_d": None, "_sigma_a": "higher", "_is_target": "higher",
+}
+
+
+def direction_of(name: str, extra: dict[str, Direction] | None = None) -> Direction:
+    """Better direction of a metric: declared (``extra``) > built-in > diagnosis suffix > None."""
+    if extra and name in extra:
+        return extra[name]
+    if name in BUILTIN:
+        return BUILTIN[name].direction
+    for suffix, direction in _DIAG_SUFFIX.items():
+        if name.endswith(suffix):
+            return direction
+    return None
+
+
+def unit_of(name: str) -> str:
+    info = BUILTIN.get(name)
+    return info.unit if info else ""

@@ -1,0 +1,140 @@
+"""Network metrics from the messages tables, on the unified clock.
+
+Every message is followed from its ``send`` row (one per destination) to the destination's ``recv``
+row, matched on ``(msg_id, dst)`` with the receiving node as ``dst``. Definitions:
+
+- latency of a delivered message = unified receive time - unified send time (ms);
+- a send with no matching receive is *lost*, except when it was still *in flight* at the end of the
+  run (sent later than ``t_end - max latency seen on that link``, ``t_end`` the last message record) or
+  its destination wrote no messages table at all (nothing can be said): both are left out of the
+  counts. ``drop`` rows of the network (node ``net``) give the reason but are not needed to count;
+- loss ratio = lost / (delivered + lost), per link (src, dst) or per agent (messages it sent or that
+  were sent to it);
+- bytes/s of an agent = bytes it sent (``tx``) or received (``rx``) in the interval / interval length;
+- the communication graph of a window has an (undirected) edge between two nodes when at least one
+  message between them was delivered in the window (by receive time); its algebraic connectivity is
+  the second-smallest eigenvalue of the graph Laplacian (0 when disconnected).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from swarmbox.analysis.load import NET
+from swarmbox.analysis.unify import T
+
+_LAT = "latency_ms"
+
+
+def message_flow(messages: pd.DataFrame) -> pd.DataFrame:
+    """One row per (message, destination): send/receive times, latency, delivered / lost / in flight."""
+    sends = messages[messages["kind"] == "send"]
+    flow = pd.DataFrame({
+        "msg_id": sends["msg_id"].astype("int64"), "type": sends["type"].astype("str"),
+        "src": sends["src"].astype("int64"), "dst": sends["dst"].astype("int64"),
+        "nbytes": sends["nbytes"].astype("float64"), "t_send": sends[T],
+    })
+    recvs = messages[messages["kind"] == "recv"]
+    recvs = pd.DataFrame({"msg_id": recvs["msg_id"].astype("int64"), "dst": recvs["node"].astype("int64"),
+                          "t_recv": recvs[T]})
+    recvs = recvs.sort_values("t_recv").drop_duplicates(["msg_id", "dst"])
+    drops = messages[messages["kind"] == "drop"]
+    drops = pd.DataFrame({"msg_id": drops["msg_id"].astype("int64"), "dst": drops["dst"].astype("int64"),
+                          "drop_reason": drops["reason"].astype("str")}).drop_duplicates(["msg_id", "dst"])
+    flow = flow.merge(recvs, on=["msg_id", "dst"], how="left").merge(drops, on=["msg_id", "dst"], how="left")
+    flow[_LAT] = (flow["t_recv"] - flow["t_send"]) * 1e3
+    flow["delivered"] = flow["t_recv"].notna()
+    logged = set(messages.loc[messages["node"] != NET, "node"].astype("int64").unique())
+    t_end = float(messages[T].max()) if len(messages) else np.nan
+    max_lat = flow.groupby(["src", "dst"])[_LAT].transform("max").fillna(0.0) / 1e3
+    in_flight = ~flow["delivered"] & (flow["t_send"] > t_end - max_lat)
+    flow["counted"] = flow["dst"].isin(logged) & ~in_flight
+    flow["lost"] = flow["counted"] & ~flow["delivered"]
+    return flow.sort_values(["t_send", "msg_id", "dst"]).reset_index(drop=True)
+
+
+def between(flow: pd.DataFrame, t0: float, t1: float) -> pd.DataFrame:
+    """Messages sent in [t0, t1] (unified clock)."""
+    return flow[(flow["t_send"] >= t0) & (flow["t_send"] <= t1)]
+
+
+def _stats(group: pd.DataFrame, span_s: float) -> pd.Series:
+    counted = group[group["counted"]]
+    lat = group.loc[group["delivered"], _LAT]
+    sent, lost = len(counted), int(counted["lost"].sum())
+    return pd.Series({
+        "sent": sent, "delivered": int(group["delivered"].sum()), "lost": lost,
+        "loss_ratio": lost / sent if sent else np.nan,
+        "latency_ms_mean": lat.mean(), "latency_ms_p50": lat.quantile(0.5),
+        "latency_ms_p95": lat.quantile(0.95), "latency_ms_max": lat.max(),
+        "bytes_per_s": group["nbytes"].sum() / span_s if span_s > 0 else np.nan,
+    })
+
+
+def link_stats(flow: pd.DataFrame, span_s: float) -> pd.DataFrame:
+    """Per directed link (src, dst): counts, loss ratio, latency mean/p50/p95/max, bytes/s."""
+    if flow.empty:
+        return pd.DataFrame(columns=["src", "dst", "sent", "lost", "loss_ratio", "latency_ms_mean"])
+    out = flow.groupby(["src", "dst"])[list(flow.columns)].apply(_stats, span_s=span_s)
+    return out.reset_index()
+
+
+def touching(flow: pd.DataFrame) -> pd.DataFrame:
+    """Each message twice: once for its sender (``agent`` = src, ``role`` tx), once for its destination."""
+    tx = flow.assign(agent=flow["src"], role="tx")
+    rx = flow.assign(agent=flow["dst"], role="rx")
+    return pd.concat([tx, rx], ignore_index=True)
+
+
+def agent_stats(flow: pd.DataFrame, span_s: float) -> pd.DataFrame:
+    """Per agent, over the messages it sent or that were sent to it; plus tx/rx bytes per second."""
+    both = touching(flow)
+    if both.empty:
+        return pd.DataFrame(columns=["agent", "sent", "lost", "loss_ratio", "latency_ms_mean"])
+    out = both.groupby("agent")[list(both.columns)].apply(_stats, span_s=span_s).drop(columns="bytes_per_s")
+    tx = flow.groupby("src")["nbytes"].sum()
+    rx = flow[flow["delivered"]].groupby("dst")["nbytes"].sum()
+    out["tx_bytes_per_s"] = (tx.reindex(out.index).fillna(0.0) / span_s) if span_s > 0 else np.nan
+    out["rx_bytes_per_s"] = (rx.reindex(out.index).fillna(0.0) / span_s) if span_s > 0 else np.nan
+    return out.reset_index()
+
+
+def overall_stats(flow: pd.DataFrame, span_s: float) -> dict[str, float]:
+    """Run-level latency and loss over every message of ``flow``."""
+    if flow.empty:
+        return {"latency_ms_mean": np.nan, "loss_ratio": np.nan}
+    stats = _stats(flow, span_s).drop(["sent", "delivered", "lost", "bytes_per_s"])
+    return {k: float(v) for k, v in stats.items()}
+
+
+def algebraic_connectivity(nodes: list[int], edges: set[tuple[int, int]]) -> float:
+    """Second-smallest Laplacian eigenvalue of the undirected graph (0 when disconnected)."""
+    if len(nodes) < 2:
+        return np.nan
+    index = {n: i for i, n in enumerate(nodes)}
+    adj = np.zeros((len(nodes), len(nodes)))
+    for a, b in edges:
+        if a in index and b in index and a != b:
+            adj[index[a], index[b]] = adj[index[b], index[a]] = 1.0
+    laplacian = np.diag(adj.sum(axis=1)) - adj
+    eig = np.linalg.eigvalsh(laplacian)
+    return float(max(eig[1], 0.0))
+
+
+def connectivity_timeline(flow: pd.DataFrame, nodes: list[int], window_s: float) -> pd.DataFrame:
+    """Algebraic connectivity of the communication graph per window: columns t_u (window start), value."""
+    nodes = sorted(n for n in nodes if n != NET)
+    got = flow[flow["delivered"]]
+    if got.empty:
+        return pd.DataFrame({T: pd.Series(dtype="float64"), "connectivity": pd.Series(dtype="float64")})
+    w = np.floor(got["t_recv"] / window_s).astype("int64")
+    pairs = pd.DataFrame({"w": w, "a": np.minimum(got["src"], got["dst"]),
+                          "b": np.maximum(got["src"], got["dst"])}).drop_duplicates()
+    rows = []
+    grouped = dict(tuple(pairs.groupby("w")))
+    for win in range(int(w.min()), int(w.max()) + 1):
+        part = grouped.get(win)
+        edges = set(zip(part["a"], part["b"], strict=True)) if part is not None else set()
+        rows.append({T: win * window_s, "connectivity": algebraic_connectivity(nodes, edges)})
+    return pd.DataFrame(rows)

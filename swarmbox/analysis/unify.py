@@ -1,0 +1,196 @@
+"""Put every node's records on one timeline: the ground clock.
+
+Clock model of a node X (ground and the simulated network are the reference, o = d = 0)::
+
+    t_local = o_X + (1 + d_X) * t_ground        (o_X offset in s, d_X drift, reported in ppm)
+
+A message A -> B received by B gives ``recv_B - sent_A = delay + off_B(t) - off_A(t)`` with
+``off_X(t) = t_local - t_ground``. Per pair of nodes that talk both ways and per window of
+``window_s`` (on A's clock), the minimum of each direction is the least-delayed message
+(minimum-delay filtering); half their difference cancels a symmetric delay and gives
+``off_B - off_A`` at the window's middle, half their sum the one-way delay. With at least
+``min_drift_windows`` windows a Theil-Sen line through those points gives the pair's relative offset
+and drift, otherwise their median gives a constant offset. A pair heard in one direction only
+contributes ``min sample - typical delay`` with a low weight. Pair estimates are then solved for
+per-node offset and drift by weighted least squares over the communication graph, anchored at the
+ground, so a drone that talks only to its leader is still placed on the ground clock. A node with no
+path to the ground keeps offset 0 (method ``assumed``).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from swarmbox.analysis.load import GROUND, NET, RunData, node_id
+
+#: Name of the unified-time column added to every table (seconds on the ground clock).
+T = "t_u"
+
+
+@dataclass(frozen=True, slots=True)
+class ClockOptions:
+    window_s: float = 5.0
+    min_drift_windows: int = 4
+    one_way_weight: float = 0.05
+
+
+@dataclass(frozen=True, slots=True)
+class PairEstimate:
+    a: int
+    b: int
+    offset_s: float     # off_b - off_a at ground time 0
+    drift: float        # d_b - d_a (dimensionless)
+    delay_s: float      # median minimum one-way delay
+    weight: float
+    windows: int
+    method: str         # two-way | one-way
+
+
+def clock_samples(messages: pd.DataFrame) -> pd.DataFrame:
+    """One row per received message: ``a`` sender, ``b`` receiver, ``t_a`` (sender clock), ``sample``."""
+    recv = messages[(messages["kind"] == "recv") & (messages["node"] != NET)]
+    recv = recv[np.isfinite(recv["t_s"]) & np.isfinite(recv["t_sent_s"])]
+    return pd.DataFrame({
+        "a": recv["src"].astype("int64").to_numpy(), "b": recv["node"].astype("int64").to_numpy(),
+        "t_a": recv["t_sent_s"].to_numpy(), "t_b": recv["t_s"].to_numpy(),
+        "sample": (recv["t_s"] - recv["t_sent_s"]).to_numpy(),
+    })
+
+
+def _window_minima(samples: pd.DataFrame, a: int, b: int, window_s: float) -> pd.DataFrame:
+    """Per window on a's clock: min forward (a->b) and min backward (b->a) sample and the window middle."""
+    fwd = samples[(samples["a"] == a) & (samples["b"] == b)]
+    bwd = samples[(samples["a"] == b) & (samples["b"] == a)]
+    # both directions on a's clock: a's send time for a->b, a's receive time for b->a
+    parts = pd.concat([
+        pd.DataFrame({"t": fwd["t_a"], "fwd": fwd["sample"], "bwd": np.nan}),
+        pd.DataFrame({"t": bwd["t_b"], "fwd": np.nan, "bwd": bwd["sample"]}),
+    ])
+    parts["w"] = np.floor(parts["t"] / window_s)
+    grouped = parts.groupby("w")
+    out = grouped.agg(fwd=("fwd", "min"), bwd=("bwd", "min"), t_lo=("t", "min"), t_hi=("t", "max"))
+    out["t_mid"] = (out["t_lo"] + out["t_hi"]) / 2
+    return out.reset_index(drop=True)
+
+
+def estimate_pair(samples: pd.DataFrame, a: int, b: int, opts: ClockOptions,
+                  typical_delay_s: float = 0.0) -> PairEstimate | None:
+    """Relative clock of b with respect to a from the messages they exchanged."""
+    win = _window_minima(samples, a, b, opts.window_s)
+    both = win.dropna(subset=["fwd", "bwd"])
+    if len(both):
+        rel = ((both["fwd"] - both["bwd"]) / 2).to_numpy()
+        delay = float(np.median((both["fwd"] + both["bwd"]) / 2))
+        t_mid = both["t_mid"].to_numpy()
+        if len(both) >= opts.min_drift_windows and np.ptp(t_mid) > 0:
+            slope, intercept, _, _ = stats.theilslopes(rel, t_mid)
+        else:
+            slope, intercept = 0.0, float(np.median(rel))
+        return PairEstimate(a, b, float(intercept), float(slope), delay, float(len(both)), len(both), "two-way")
+    if win["fwd"].notna().any():
+        rel = float(win["fwd"].min()) - typical_delay_s
+    elif win["bwd"].notna().any():
+        rel = typical_delay_s - float(win["bwd"].min())
+    else:
+        return None
+    return PairEstimate(a, b, rel, 0.0, typical_delay_s, opts.one_way_weight, 0, "one-way")
+
+
+def estimate_pairs(samples: pd.DataFrame, opts: ClockOptions) -> list[PairEstimate]:
+    pairs = {(min(a, b), max(a, b)) for a, b in zip(samples["a"], samples["b"], strict=True) if a != b}
+    two_way = [e for p in sorted(pairs) if (e := estimate_pair(samples, *p, opts)) and e.method == "two-way"]
+    typical = float(np.median([e.delay_s for e in two_way])) if two_way else 0.0
+    done = {(e.a, e.b) for e in two_way}
+    one_way = [e for p in sorted(pairs - done) if (e := estimate_pair(samples, *p, opts, typical))]
+    return two_way + one_way
+
+
+def _reachable(pairs: list[PairEstimate], anchors: set[int]) -> set[int]:
+    adj: dict[int, set[int]] = {}
+    for e in pairs:
+        adj.setdefault(e.a, set()).add(e.b)
+        adj.setdefault(e.b, set()).add(e.a)
+    seen, queue = set(anchors), deque(anchors)
+    while queue:
+        for nxt in adj.get(queue.popleft(), ()):
+            if nxt not in seen:
+                seen.add(nxt)
+                queue.append(nxt)
+    return seen
+
+
+def solve_clocks(pairs: list[PairEstimate], nodes: list[int]) -> pd.DataFrame:
+    """Per-node offset and drift relative to the ground by weighted least squares over pair estimates."""
+    anchors = {GROUND, NET}
+    free = sorted(_reachable(pairs, anchors) - anchors)
+    col = {n: i for i, n in enumerate(free)}
+    used = [e for e in pairs if (e.a in col or e.a in anchors) and (e.b in col or e.b in anchors)]
+    solution = np.zeros((len(free), 2))
+    if free and used:
+        design = np.zeros((len(used), len(free)))
+        rhs = np.array([[e.offset_s, e.drift] for e in used])
+        for row, e in enumerate(used):
+            if e.b in col:
+                design[row, col[e.b]] += 1.0
+            if e.a in col:
+                design[row, col[e.a]] -= 1.0
+        w = np.sqrt([e.weight for e in used])[:, None]
+        solution = np.linalg.lstsq(design * w, rhs * w, rcond=None)[0]
+    rows = []
+    for n in sorted(set(nodes) | anchors):
+        method = _method(n, col, used)
+        off, drift = solution[col[n]] if n in col else (0.0, 0.0)
+        rows.append({"node": n, "offset_s": float(off), "drift_ppm": float(drift) * 1e6, "method": method,
+                     "pairs": sum(1 for e in used if n in (e.a, e.b))})
+    return pd.DataFrame(rows)
+
+
+def _method(node: int, col: dict[int, int], used: list[PairEstimate]) -> str:
+    if node in (GROUND, NET):
+        return "reference"
+    if node not in col:
+        return "assumed"
+    mine = [e for e in used if node in (e.a, e.b)]
+    return "two-way" if any(e.method == "two-way" for e in mine) else "one-way"
+
+
+def estimate_clocks(messages: pd.DataFrame, nodes: list[int], opts: ClockOptions | None = None) -> pd.DataFrame:
+    """Estimated clock of every node: columns node, offset_s, drift_ppm, method, pairs."""
+    opts = opts or ClockOptions()
+    return solve_clocks(estimate_pairs(clock_samples(messages), opts), nodes)
+
+
+def to_unified(t_local: pd.Series, node: pd.Series, clocks: pd.DataFrame) -> pd.Series:
+    """Map node-local times to ground time with each node's estimated offset and drift."""
+    idx = clocks.set_index("node")
+    node = node.astype("int64")
+    off = node.map(idx["offset_s"]).fillna(0.0).astype("float64")
+    drift = node.map(idx["drift_ppm"]).fillna(0.0).astype("float64") * 1e-6
+    return (t_local.astype("float64") - off) / (1.0 + drift)
+
+
+def unify(run: RunData, opts: ClockOptions | None = None) -> pd.DataFrame:
+    """Estimate clocks and add the unified time ``t_u`` to every table of ``run`` (in place).
+
+    Messages also get ``t_sent_u``: the sender's ``t_sent_s`` mapped with the sender's clock.
+    Returns the clock table, with the configured truth from ``run.json`` (``clocks``) beside it.
+    """
+    clocks = estimate_clocks(run.tables["messages"], run.nodes, opts)
+    for frame in run.tables.values():
+        frame[T] = to_unified(frame["t_s"], frame["node"], clocks)
+    msgs = run.tables["messages"]
+    msgs["t_sent_u"] = to_unified(msgs["t_sent_s"], msgs["src"].fillna(GROUND), clocks)
+    return _with_truth(clocks, run.manifest.get("clocks") or {})
+
+
+def _with_truth(clocks: pd.DataFrame, truth: dict) -> pd.DataFrame:
+    true = {node_id(str(k)): v for k, v in truth.items() if isinstance(v, dict)}
+    clocks["true_offset_s"] = [float(true.get(n, {}).get("offset_s", 0.0)) for n in clocks["node"]]
+    clocks["true_drift_ppm"] = [float(true.get(n, {}).get("drift_ppm", 0.0)) for n in clocks["node"]]
+    clocks["offset_error_ms"] = (clocks["offset_s"] - clocks["true_offset_s"]) * 1e3
+    return clocks

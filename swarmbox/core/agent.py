@@ -1,0 +1,196 @@
+"""A drone's agent node: the per-agent state machine that mirrors the ground's.
+
+Per tick: read telemetry -> drain the inbox (Heartbeats may move the stage; tasks go to
+``on_task``) -> superior watchdog (handover / failsafe) -> inferior bookkeeping -> stage work (user
+hooks, setpoint to the vehicle) -> Heartbeat and Report out -> task retries -> state row.
+"""
+
+from __future__ import annotations
+
+from swarmbox.api import DroneAlgorithm, DroneContext, Setpoint, SetpointKind, Telemetry
+from swarmbox.core.messages import Heartbeat, ProxAlert, Report, TaskAck, TaskCommand
+from swarmbox.core.node import Node, call_hook
+from swarmbox.core.stages import TERMINAL, Stage, path_to
+
+_KIND_NAMES = {SetpointKind.POSITION: "position", SetpointKind.VELOCITY: "velocity",
+               SetpointKind.ACCELERATION: "acceleration"}
+_NAN = float("nan")
+_NAN3 = (_NAN, _NAN, _NAN)
+
+
+class AgentNode(Node):
+    def __init__(self, node_id: int, *, superior: int, algorithm: DroneAlgorithm, vehicle, **kw) -> None:
+        super().__init__(node_id, **kw)
+        self.superior, self.algorithm, self.vehicle = superior, algorithm, vehicle
+        self.home_ned_m = tuple(float(x) for x in vehicle.home_ned_m)
+        self.ctx = DroneContext(self)
+        self.telemetry: Telemetry = vehicle.telemetry()
+        self.complete = False
+        self.removed = False
+        self.reason = ""
+        self.report_data = ""
+        self.last_task: TaskCommand | None = None
+        self.prox_alert: ProxAlert | None = None
+        self.peer_heartbeats: dict[int, Heartbeat] = {}
+        self._sup_silent, self._heard_superior = 0, False
+        self._successor_list: tuple[int, ...] = ()
+        self._abandoned: set[int] = set()
+        self._seen_tasks: dict[int, set[int]] = {}
+        self._gnss_seq = -1
+        self._exec_done = False
+        self._log_state = kw["log"].appender("state")
+        self._log_setpoint = kw["log"].appender("setpoints")
+        self.net.subscribe(node_id, superior)
+
+    # -- the tick -------------------------------------------------------------------------------
+    def tick(self) -> None:
+        self.stage_tick += 1
+        tel = self.telemetry = self.vehicle.telemetry()
+        self._drain_inbox()
+        if self.stage not in TERMINAL:
+            self._watch_superior()
+        self.age_inferiors()
+        self.complete = self._stage_work(tel)
+        self._publish(tel)
+        self.retry_tasks()
+        if self.time.tick % self.timing.state_every_ticks == 0:
+            self._record_state(tel)
+        if self.stage in TERMINAL and (tel.landed or not tel.armed):
+            self.finished = True
+
+    def _drain_inbox(self) -> None:
+        inbox = self.inbox
+        for msg in inbox:
+            kind = type(msg)
+            if kind is Heartbeat:
+                if msg.src == self.superior:
+                    self._sup_silent, self._heard_superior = 0, True
+                    self._successor_list = msg.successors
+                    self._follow(Stage(msg.stage))
+                else:
+                    self.peer_heartbeats[msg.src] = msg
+            elif kind is Report:
+                if self.on_report(msg):
+                    call_hook(self, "on_report", self.algorithm.on_report, self.ctx, msg)
+            elif kind is TaskCommand:
+                self._on_task(msg)
+            elif kind is TaskAck:
+                self.on_ack(msg)
+            elif kind is ProxAlert:
+                self.prox_alert = msg
+        inbox.clear()
+
+    def _on_task(self, cmd: TaskCommand) -> None:
+        if cmd.reliable:
+            self.net.send(TaskAck(self.next_msg_id(), self.clock.now(), self.node_id, cmd.src, cmd.seq),
+                          cmd.src)
+            seen = self._seen_tasks.setdefault(cmd.src, set())
+            if cmd.seq in seen:
+                return
+            seen.add(cmd.seq)
+        self.last_task = cmd
+        call_hook(self, "on_task", self.algorithm.on_task, self.ctx, cmd)
+
+    # -- stages ---------------------------------------------------------------------------------
+    def _follow(self, commanded: Stage) -> None:
+        """Adopt the superior's stage, running the entry action of every stage passed through."""
+        if commanded == self.stage or self.stage in TERMINAL:
+            return
+        if commanded is Stage.ABORT:
+            self.enter(Stage.ABORT, "superior aborted")
+        elif commanded > self.stage:
+            for stage in path_to(self.stage, commanded):
+                self.enter(stage)
+
+    def enter(self, stage: Stage, reason: str = "", *, failsafe: bool = False) -> None:
+        self.set_stage(stage, reason)
+        self.complete = False
+        vehicle = self.vehicle
+        if stage is Stage.EXECUTION:
+            vehicle.arm()
+        elif stage is Stage.LANDING:
+            vehicle.land()
+        elif stage is Stage.ABORT:
+            self.reason = reason
+            tel = self.telemetry
+            if tel.armed and not tel.landed:
+                vehicle.return_to_launch() if failsafe else vehicle.land()
+            elif tel.armed:
+                vehicle.disarm()
+        call_hook(self, f"{stage.name.lower()} entry", self.algorithm.enter_stage, stage, self.ctx)
+
+    def _stage_work(self, tel: Telemetry) -> bool:
+        stage = self.stage
+        if stage in (Stage.PREPARATION, Stage.EXECUTION):
+            if (stage is Stage.EXECUTION and not tel.armed
+                    and self.stage_tick % self.timing.arm_retry_ticks == 0):
+                self.vehicle.arm()
+            complete, sp = call_hook(self, f"{stage.name.lower()} loop", self.algorithm.run_stage, stage,
+                                     self.ctx)
+            if sp is not None:
+                self._fly(sp)
+            if stage is Stage.EXECUTION and complete != self._exec_done:
+                self._exec_done = complete
+                self.event("progress", "exec_complete" if complete else "exec_incomplete", self.node_id)
+            return complete
+        if stage is Stage.LANDING:
+            return tel.landed
+        if stage is Stage.ABORT:
+            return tel.landed or not tel.armed
+        return True  # ICEBREAK, TERMINATION
+
+    def _fly(self, sp: Setpoint) -> None:
+        if type(sp) is not Setpoint:
+            raise TypeError(f"drone {self.node_id}: exec_loop returned {type(sp).__name__}, "
+                            "expected Setpoint or None")
+        verdict = self.vehicle.setpoint(sp) or "ok"
+        n, e, d = sp.ned
+        self._log_setpoint((self.clock.now(), self.time.tick, _KIND_NAMES[sp.kind], n, e, d,
+                            _NAN if sp.yaw_rad is None else sp.yaw_rad, verdict))
+
+    # -- superior watchdog ----------------------------------------------------------------------
+    def _watch_superior(self) -> None:
+        if not self._heard_superior:
+            return
+        self._sup_silent += 1
+        if self._sup_silent <= self.timing.lost_superior_ticks:
+            return
+        lost = self.superior
+        self._abandoned.add(lost)
+        options = [s for s in self._successor_list if s != self.node_id and s not in self._abandoned]
+        if options:
+            self.net.unsubscribe(self.node_id, lost)
+            self.superior = options[0]
+            self.net.subscribe(self.node_id, self.superior)
+            self._sup_silent = 0
+            self.event("topology", "handover", self.node_id, lost=lost, new=self.superior)
+            return
+        self.event("failsafe", "superior_lost", self.node_id, superior=lost,
+                   action="return_to_launch")
+        self.enter(Stage.ABORT, f"lost superior {lost} with no successor left", failsafe=True)
+
+    # -- outgoing -------------------------------------------------------------------------------
+    def _publish(self, tel: Telemetry) -> None:
+        node_id, net = self.node_id, self.net
+        if net.has_subscribers(node_id):
+            succ = tuple(call_hook(self, "successors", self.algorithm.successors, self.ctx))
+            net.publish(Heartbeat(self.next_msg_id(), self.clock.now(), node_id, int(self.stage), succ,
+                                  tel.pos_ned_m, tel.vel_ned_m_s))
+        total, alive = self.head_count()
+        disc = None
+        if tel.gnss_seq != self._gnss_seq and tel.gnss_ned_m is not None:
+            self._gnss_seq = tel.gnss_seq
+            g, p = tel.gnss_ned_m, tel.pos_ned_m
+            disc = (g[0] - p[0], g[1] - p[1], g[2] - p[2])
+        complete = self.complete and self.inferiors_complete()
+        net.send(Report(self.next_msg_id(), self.clock.now(), node_id, self.superior, int(self.stage),
+                        complete, total + 1, alive + (self.stage is not Stage.ABORT), tel.pos_ned_m,
+                        tel.vel_ned_m_s, disc, self.report_data, self.descendants()), self.superior)
+
+    def _record_state(self, tel: Telemetry) -> None:
+        p, v = tel.pos_ned_m, tel.vel_ned_m_s
+        g = tel.gnss_ned_m or _NAN3
+        tp = tel.true_pos_ned_m or _NAN3
+        self._log_state((self.clock.now(), self.time.tick, int(self.stage), tel.armed, tel.landed,
+                         tel.mode.value, p[0], p[1], p[2], v[0], v[1], v[2], g[0], g[1], g[2],
+                         tp[0], tp[1], tp[2], tel.yaw_rad, tel.battery_frac))

@@ -1,0 +1,142 @@
+"""Swarm messages: Heartbeat, Report, TaskCommand (+ TaskAck) and ProxAlert.
+
+Fields follow the reference implementation; every message also carries a run-unique ``msg_id``, the
+sender's local clock time ``t_sent_s`` and can tell its encoded size (``nbytes``), so the recorder and
+the analyzer can follow each message across the network. Messages are immutable ``NamedTuple``s: they
+are built tens of thousands of times per simulated minute and must stay cheap.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+GROUND_ID = -1
+#: Pseudo-node id under which the simulated network records drops.
+NET_ID = -2
+
+# Encoded sizes (bytes) of a compact binary encoding: header = msg_id u64, t_sent f64, src i16,
+# dst i16, type u8.
+_HEADER = 21
+_VEC3 = 12  # three float32
+
+
+def make_msg_id(src: int, seq: int) -> int:
+    """A run-unique message id from the sender id and the sender's message counter."""
+    return ((src + 2) << 40) | seq
+
+
+def msg_sender(msg_id: int) -> int:
+    return (msg_id >> 40) - 2
+
+
+class Heartbeat(NamedTuple):
+    """Superior -> its inferiors (and any subscribed peer), every tick.
+
+    ``stage`` is the command for the inferiors; ``successors`` is the ordered list of fallback
+    superiors for the sender's inferiors should the sender fall silent.
+    """
+
+    msg_id: int
+    t_sent_s: float
+    src: int
+    stage: int
+    successors: tuple[int, ...]
+    pos_ned_m: tuple[float, float, float]
+    vel_ned_m_s: tuple[float, float, float]
+
+    @property
+    def nbytes(self) -> int:
+        return _HEADER + 1 + 1 + 2 * len(self.successors) + 2 * _VEC3
+
+
+class DescendantState(NamedTuple):
+    """A drone's summary forwarded up the hierarchy inside its superior's Report."""
+
+    drone_id: int
+    stage: int
+    pos_ned_m: tuple[float, float, float]
+
+
+class Report(NamedTuple):
+    """Inferior -> its superior, every tick: progress, head-count, own state, mission payload."""
+
+    msg_id: int
+    t_sent_s: float
+    src: int
+    dst: int
+    stage: int
+    complete: bool
+    total_count: int
+    total_alive: int
+    pos_ned_m: tuple[float, float, float]
+    vel_ned_m_s: tuple[float, float, float]
+    discrepancy_ned_m: tuple[float, float, float] | None
+    data: str
+    descendants: tuple[DescendantState, ...]
+
+    @property
+    def nbytes(self) -> int:
+        return (_HEADER + 1 + 1 + 2 + 2 + 3 * _VEC3 + 2 + len(self.data)
+                + len(self.descendants) * (2 + 1 + _VEC3))
+
+
+class TaskCommand(NamedTuple):
+    """A superior's command to one inferior. Its meaning (``code``, ``data``) belongs to the algorithm.
+
+    ``reliable`` commands are acknowledged by a :class:`TaskAck` and re-sent until acknowledged;
+    the receiver drops duplicates by ``seq``.
+    """
+
+    msg_id: int
+    t_sent_s: float
+    src: int
+    dst: int
+    seq: int
+    reliable: bool
+    code: int
+    waypoint_ned_m: tuple[float, float, float] | None
+    yaw_rad: float | None
+    data: str
+
+    @property
+    def nbytes(self) -> int:
+        return _HEADER + 4 + 1 + 1 + _VEC3 + 4 + 2 + len(self.data)
+
+
+class TaskAck(NamedTuple):
+    """Acknowledges the reliable TaskCommand ``seq`` from ``dst`` (the original sender)."""
+
+    msg_id: int
+    t_sent_s: float
+    src: int
+    dst: int
+    seq: int
+
+    @property
+    def nbytes(self) -> int:
+        return _HEADER + 4
+
+
+class ProxAlert(NamedTuple):
+    """Ground -> a drone that has others within the proximity radius: their ids and positions."""
+
+    msg_id: int
+    t_sent_s: float
+    src: int
+    dst: int
+    neighbours: tuple[DescendantState, ...]
+
+    @property
+    def nbytes(self) -> int:
+        return _HEADER + 2 + len(self.neighbours) * (2 + 1 + _VEC3)
+
+
+Message = Heartbeat | Report | TaskCommand | TaskAck | ProxAlert
+
+MESSAGE_TYPES: dict[type, str] = {
+    Heartbeat: "heartbeat",
+    Report: "report",
+    TaskCommand: "task",
+    TaskAck: "ack",
+    ProxAlert: "prox",
+}

@@ -1,0 +1,231 @@
+"""What the ground node and the agent nodes share: stages, messaging, inferior bookkeeping,
+reliable task commands, markers and logging."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from swarmbox.api import MissionInfo
+from swarmbox.core.clock import NodeClock, TimeSource
+from swarmbox.core.messages import (
+    DescendantState,
+    Report,
+    TaskAck,
+    TaskCommand,
+    make_msg_id,
+)
+from swarmbox.core.stages import Stage, check_transition
+from swarmbox.record.schema import NO_SUBJECT
+
+Row = tuple
+
+
+class Transport(Protocol):
+    """What a node needs from the network."""
+
+    def send(self, msg: Any, dst: int) -> None: ...
+    def publish(self, msg: Any) -> None: ...
+    def subscribe(self, subscriber: int, publisher: int) -> None: ...
+    def unsubscribe(self, subscriber: int, publisher: int) -> None: ...
+    def has_subscribers(self, publisher: int) -> bool: ...
+
+
+class NodeLog(Protocol):
+    """Where a node writes its rows (see ``swarmbox.record.schema`` for the columns)."""
+
+    def appender(self, table: str) -> Callable[[Row], None]: ...
+
+
+@dataclass(frozen=True, slots=True)
+class CoreTiming:
+    """Protocol timings and limits, in ticks unless the name says otherwise."""
+
+    tick_s: float = 0.025
+    lost_inferior_ticks: int = 20
+    lost_superior_ticks: int = 40
+    task_retry_ticks: int = 8
+    task_max_retries: int = 40
+    arm_retry_ticks: int = 20
+    proximity_m: float = 2.0
+    min_alive: int = 1
+    state_every_ticks: int = 1
+    timeouts_s: Mapping[str, float] = field(default_factory=lambda: {
+        "ICEBREAK": 60.0, "PREPARATION": 60.0, "EXECUTION": 900.0, "LANDING": 120.0,
+        "TERMINATION": 10.0, "ABORT": 120.0})
+
+
+class AlgorithmError(RuntimeError):
+    """A user hook raised; the message names the node and the hook."""
+
+
+class _Inferior:
+    __slots__ = ("report", "silent_ticks", "alive")
+
+    def __init__(self, report: Report) -> None:
+        self.report, self.silent_ticks, self.alive = report, 0, True
+
+
+class _Pending:
+    __slots__ = ("cmd", "next_tick", "retries")
+
+    def __init__(self, cmd: TaskCommand, next_tick: int) -> None:
+        self.cmd, self.next_tick, self.retries = cmd, next_tick, 0
+
+
+class Node:
+    """Base of the ground node and the agent node."""
+
+    def __init__(self, node_id: int, *, time: TimeSource, clock: NodeClock, net: Transport,
+                 inbox: list, log: NodeLog, timing: CoreTiming, mission: MissionInfo,
+                 params: Mapping[str, Any], rng: np.random.Generator) -> None:
+        self.node_id = node_id
+        self.time, self.clock, self.net, self.inbox = time, clock, net, inbox
+        self.timing, self.tick_s = timing, timing.tick_s
+        self.mission, self.params, self.rng = mission, params, rng
+        self.stage = Stage.ICEBREAK
+        self.stage_tick = 0
+        self.finished = False
+        self.inferiors: dict[int, _Inferior] = {}
+        self._seq = 0
+        self._task_seq: dict[int, int] = {}
+        self._pending: dict[tuple[int, int], _Pending] = {}
+        self._log_stage = log.appender("stages")
+        self._log_event = log.appender("events")
+        self._log_stage((clock.now(), time.tick, int(Stage.ICEBREAK), Stage.ICEBREAK.name, ""))
+
+    # -- ids, logging ---------------------------------------------------------------------------
+    def next_msg_id(self) -> int:
+        self._seq += 1
+        return make_msg_id(self.node_id, self._seq)
+
+    def event(self, kind: str, name: str, subject: int = NO_SUBJECT, **data: Any) -> None:
+        self._log_event((self.clock.now(), self.time.tick, kind, name, subject,
+                         json.dumps(data, sort_keys=True, default=_jsonable)))
+
+    def mark(self, name: str, fields: Mapping[str, Any]) -> None:
+        self.event("marker", str(name), self.node_id, **fields)
+
+    # -- stages ---------------------------------------------------------------------------------
+    def set_stage(self, stage: Stage, reason: str = "") -> None:
+        check_transition(self.stage, stage)
+        self.stage, self.stage_tick = stage, 0
+        self._log_stage((self.clock.now(), self.time.tick, int(stage), stage.name, reason))
+
+    def stage_timed_out(self) -> bool:
+        return self.stage_tick * self.tick_s > self.timing.timeouts_s[self.stage.name]
+
+    # -- inferiors ------------------------------------------------------------------------------
+    def on_report(self, rep: Report) -> bool:
+        """Store a Report; returns False (and logs) when the sender is not a known drone."""
+        if rep.src not in self.mission.initial_positions:
+            self.event("error", "unknown_drone", rep.src, reason="report from a drone not in the mission")
+            return False
+        inf = self.inferiors.get(rep.src)
+        if inf is None:
+            self.inferiors[rep.src] = _Inferior(rep)
+            self.event("topology", "inferior_joined", rep.src)
+        else:
+            if not inf.alive:
+                inf.alive = True
+                self.event("topology", "inferior_rejoined", rep.src)
+            inf.report, inf.silent_ticks = rep, 0
+        return True
+
+    def age_inferiors(self) -> None:
+        limit = self.timing.lost_inferior_ticks
+        for drone_id, inf in self.inferiors.items():
+            inf.silent_ticks += 1
+            if inf.alive and inf.silent_ticks > limit:
+                inf.alive = False
+                self.event("topology", "inferior_lost", drone_id, silent_ticks=inf.silent_ticks)
+                self._forget_pending(drone_id)
+
+    def alive_reports(self) -> dict[int, Report]:
+        return {i: inf.report for i, inf in self.inferiors.items() if inf.alive}
+
+    def inferiors_complete(self) -> bool:
+        """Every alive direct inferior reports complete *for this node's current stage*."""
+        stage = int(self.stage)
+        return all(inf.report.complete and inf.report.stage == stage
+                   for inf in self.inferiors.values() if inf.alive)
+
+    def head_count(self) -> tuple[int, int]:
+        """(total, alive) drones reachable through alive direct inferiors."""
+        total = alive = 0
+        for inf in self.inferiors.values():
+            if inf.alive:
+                total += inf.report.total_count
+                alive += inf.report.total_alive
+        return total, alive
+
+    def descendants(self) -> tuple[DescendantState, ...]:
+        out = []
+        for drone_id, inf in self.inferiors.items():
+            if inf.alive:
+                rep = inf.report
+                out.append(DescendantState(drone_id, rep.stage, rep.pos_ned_m))
+                out.extend(rep.descendants)
+        return tuple(out)
+
+    # -- tasks ----------------------------------------------------------------------------------
+    def send_task(self, dst: int, code: int, waypoint: tuple | None, yaw_rad: float | None,
+                  data: str, reliable: bool) -> None:
+        inf = self.inferiors.get(dst)
+        if inf is None or not inf.alive:
+            self.event("error", "task_to_unknown_inferior", dst, code=code,
+                       known=sorted(self.alive_reports()))
+            return
+        seq = self._task_seq.get(dst, 0) + 1
+        self._task_seq[dst] = seq
+        cmd = TaskCommand(self.next_msg_id(), self.clock.now(), self.node_id, dst, seq, reliable,
+                          int(code), waypoint, yaw_rad, data)
+        self.net.send(cmd, dst)
+        if reliable:
+            self._pending[(dst, seq)] = _Pending(cmd, self.time.tick + self.timing.task_retry_ticks)
+
+    def on_ack(self, ack: TaskAck) -> None:
+        self._pending.pop((ack.src, ack.seq), None)
+
+    def retry_tasks(self) -> None:
+        if not self._pending:
+            return
+        tick = self.time.tick
+        for key, p in list(self._pending.items()):
+            if tick < p.next_tick:
+                continue
+            if p.retries >= self.timing.task_max_retries:
+                del self._pending[key]
+                self.event("error", "task_undelivered", key[0], seq=key[1], retries=p.retries)
+                continue
+            p.retries += 1
+            p.next_tick = tick + self.timing.task_retry_ticks
+            self.net.send(p.cmd._replace(msg_id=self.next_msg_id(), t_sent_s=self.clock.now()), key[0])
+
+    def _forget_pending(self, dst: int) -> None:
+        for key in [k for k in self._pending if k[0] == dst]:
+            del self._pending[key]
+
+
+def call_hook(node: Node, hook: str, fn: Callable, *args: Any) -> Any:
+    """Run a user hook; wrap anything it raises in an AlgorithmError naming node and hook."""
+    try:
+        return fn(*args)
+    except Exception as exc:  # the user's code may raise anything
+        who = "ground" if node.node_id < 0 else f"drone {node.node_id}"
+        raise AlgorithmError(f"{who}: {hook} raised {type(exc).__name__}: {exc}") from exc
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, float) and not math.isfinite(x):
+        return str(x)
+    return str(x)

@@ -1,0 +1,116 @@
+"""The tick loop: one run of a swarm, from ICEBREAK to TERMINATION (or ABORT).
+
+Per tick, in order: deliver due messages -> ground tick -> each agent tick (state machine, user
+hook, setpoint to its vehicle, state row) -> the backend advances by one tick -> vehicle events
+are logged. A simulation backend runs on a virtual clock as fast as the CPU allows; a real-time
+backend (MAVLink, hardware) is paced on the wall clock, optionally sped up by the simulator's
+speed factor.
+"""
+
+from __future__ import annotations
+
+import heapq
+import json
+import time as wall
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from swarmbox.core.agent import AgentNode
+from swarmbox.core.clock import TimeSource
+from swarmbox.core.ground import GroundNode
+from swarmbox.core.stages import Stage
+
+
+@dataclass(frozen=True, slots=True)
+class Outcome:
+    status: str        # "ok" | "aborted"
+    reason: str
+    sim_time_s: float
+    ticks: int
+    wall_time_s: float
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.sim_time_s / self.wall_time_s if self.wall_time_s > 0 else float("inf")
+
+
+class Swarm:
+    """Owns the nodes, the network, the backend and the clock of one run."""
+
+    def __init__(self, *, time: TimeSource, tick_s: float, ground: GroundNode, agents: list[AgentNode],
+                 medium, backend, event_logs: dict[int, Callable]) -> None:
+        self.time, self.tick_s = time, tick_s
+        self.ground, self.agents = ground, agents
+        self.medium, self.backend = medium, backend
+        self._event_logs = event_logs
+        self._scheduled: list[tuple[float, int, Callable[[Swarm], None]]] = []
+
+    def schedule(self, at_s: float, action: Callable[[Swarm], None]) -> None:
+        """Run ``action(swarm)`` at the first tick at or after true time ``at_s``."""
+        heapq.heappush(self._scheduled, (at_s, len(self._scheduled), action))
+
+    def remove_agent(self, drone_id: int) -> None:
+        """The drone's companion computer dies: its node stops and its radio falls silent.
+
+        The autopilot, no longer receiving setpoints, lands where it is (its offboard-loss failsafe).
+        """
+        agent = self.agents[drone_id]
+        agent.removed = agent.finished = True
+        self.medium.disconnect(drone_id)
+        agent.event("failsafe", "node_removed", drone_id, action="land")
+        agent.vehicle.land()
+
+    def step(self) -> None:
+        t = self.time
+        while self._scheduled and self._scheduled[0][0] <= t.t_s + 1e-9:
+            heapq.heappop(self._scheduled)[2](self)
+        self.medium.deliver_due()
+        self.ground.tick()
+        for agent in self.agents:
+            if not agent.removed:
+                agent.tick()
+        self.backend.step(self.tick_s)
+        for ev in self.backend.drain_events():
+            log = self._event_logs.get(ev.drone_id)
+            if log is not None:
+                agent = self.agents[ev.drone_id]
+                log((agent.clock.now(), t.tick, ev.kind, ev.name, ev.drone_id,
+                     json.dumps(ev.data, sort_keys=True, default=str)))
+        t.tick += 1
+        t.t_s = t.tick * self.tick_s
+
+    def done(self) -> bool:
+        return self.ground.finished and all(a.finished for a in self.agents)
+
+    def run(self, max_sim_time_s: float, speed: float = 1.0,
+            progress: Callable[[Swarm], None] | None = None) -> Outcome:
+        """Tick until every node has finished or ``max_sim_time_s`` passes."""
+        start = wall.perf_counter()
+        realtime = bool(getattr(self.backend, "realtime", False))
+        max_ticks = int(round(max_sim_time_s / self.tick_s))
+        report_every = max(1, int(round(10.0 / self.tick_s)))
+        while not self.done() and self.time.tick < max_ticks:
+            self.step()
+            if realtime:
+                ahead = self.time.t_s / speed - (wall.perf_counter() - start)
+                if ahead > 0:
+                    wall.sleep(ahead)
+            if progress is not None and self.time.tick % report_every == 0:
+                progress(self)
+        elapsed = wall.perf_counter() - start
+        return self._outcome(elapsed, max_sim_time_s)
+
+    def _outcome(self, elapsed: float, max_sim_time_s: float) -> Outcome:
+        g = self.ground
+        if not self.done():
+            status, reason = "aborted", (f"max_sim_time_s {max_sim_time_s:g} reached with the ground in "
+                                         f"{g.stage.name}")
+        elif g.stage is Stage.ABORT:
+            status, reason = "aborted", g.reason
+        else:
+            status = "ok"
+            lost = sorted(i for i, inf in g.inferiors.items() if not inf.alive)
+            aborted = sorted(a.node_id for a in self.agents if a.stage is Stage.ABORT)
+            reason = "; ".join(filter(None, [f"lost drones {lost}" if lost else "",
+                                             f"drones {aborted} aborted" if aborted else ""]))
+        return Outcome(status, reason, self.time.t_s, self.time.tick, elapsed)

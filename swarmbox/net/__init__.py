@@ -1,0 +1,1 @@
+"""Transports that carry swarm messages between nodes (the simulated medium; real links later)."""

@@ -1,0 +1,144 @@
+"""An in-process network on the run's clock, with per-link latency, jitter and loss.
+
+Every message is recorded where it happens: a ``send`` row in the sender's log (one per
+destination), a ``recv`` row in the receiver's log stamped with the receiver's clock at the
+*arrival* instant (so latency below one tick is measurable), and a ``drop`` row in the ``net`` log.
+A message sent during tick k is handed to its receiver at the first tick at or after its arrival,
+and never earlier than tick k+1. All randomness comes from the generator given at construction.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from swarmbox.core.clock import NodeClock, TimeSource
+from swarmbox.core.messages import MESSAGE_TYPES
+
+Row = tuple
+Append = Callable[[Row], None]
+
+
+@dataclass(frozen=True, slots=True)
+class LinkSpec:
+    latency_s: float = 0.0   # constant one-way delay
+    jitter_s: float = 0.0    # extra delay, uniform in [0, jitter_s]
+    loss_prob: float = 0.0   # Bernoulli drop probability
+
+    def __post_init__(self) -> None:
+        if self.latency_s < 0 or self.jitter_s < 0:
+            raise ValueError(f"link latency and jitter must be >= 0, got {self}")
+        if not 0.0 <= self.loss_prob <= 1.0:
+            raise ValueError(f"link loss_prob must be within [0, 1], got {self.loss_prob}")
+
+
+#: A link hook (used by fault injection) sees each (message, src, dst) at send time and returns
+#: None to leave it alone, or (drop_reason or "", extra_delay_s).
+LinkHook = Callable[[object, int, int, float], "tuple[str, float] | None"]
+
+
+class _Endpoint:
+    __slots__ = ("clock", "log", "inbox", "connected")
+
+    def __init__(self, clock: NodeClock, log: Append) -> None:
+        self.clock, self.log = clock, log
+        self.inbox: list = []
+        self.connected = True
+
+
+class SimMedium:
+    """The simulated network. Nodes register, subscribe to Heartbeat publishers, send, receive."""
+
+    def __init__(self, time: TimeSource, rng: np.random.Generator, default: LinkSpec = LinkSpec(),
+                 links: Mapping[tuple[int, int], LinkSpec] | None = None,
+                 drop_log: Append | None = None) -> None:
+        self._time, self._rng, self._default = time, rng, default
+        self._links = dict(links or {})
+        self._drop_log = drop_log or (lambda row: None)
+        self._nodes: dict[int, _Endpoint] = {}
+        self._subscribers: dict[int, list[int]] = {}
+        self._queue: list = []
+        self._seq = 0
+        self.hooks: list[LinkHook] = []
+
+    # -- membership -----------------------------------------------------------------------------
+    def register(self, node_id: int, clock: NodeClock, log: Append) -> list:
+        """Attach a node; returns its inbox (a list the node drains each tick)."""
+        ep = _Endpoint(clock, log)
+        self._nodes[node_id] = ep
+        return ep.inbox
+
+    def disconnect(self, node_id: int) -> None:
+        """The node goes silent: nothing it sends leaves, nothing reaches it (e.g. a crash)."""
+        self._nodes[node_id].connected = False
+
+    def subscribe(self, subscriber: int, publisher: int) -> None:
+        subs = self._subscribers.setdefault(publisher, [])
+        if subscriber not in subs:
+            subs.append(subscriber)
+
+    def unsubscribe(self, subscriber: int, publisher: int) -> None:
+        subs = self._subscribers.get(publisher, [])
+        if subscriber in subs:
+            subs.remove(subscriber)
+
+    def has_subscribers(self, publisher: int) -> bool:
+        return bool(self._subscribers.get(publisher))
+
+    def link(self, src: int, dst: int) -> LinkSpec:
+        return self._links.get((src, dst), self._default)
+
+    # -- traffic --------------------------------------------------------------------------------
+    def publish(self, msg) -> None:
+        """Send a Heartbeat to every subscriber of its sender."""
+        for dst in self._subscribers.get(msg.src, ()):
+            self.send(msg, dst)
+
+    def send(self, msg, dst: int) -> None:
+        src = msg.src
+        sender = self._nodes[src]
+        if not sender.connected:
+            return
+        t = self._time.t_s
+        mtype = MESSAGE_TYPES[type(msg)]
+        nbytes = msg.nbytes
+        tick = self._time.tick
+        sender.log((sender.clock.now(), tick, "send", msg.msg_id, mtype, src, dst, nbytes,
+                    msg.t_sent_s, ""))
+        spec = self._links.get((src, dst), self._default)
+        delay = spec.latency_s
+        if spec.jitter_s:
+            delay += spec.jitter_s * self._rng.random()
+        reason = ""
+        if spec.loss_prob and self._rng.random() < spec.loss_prob:
+            reason = "loss"
+        for hook in self.hooks:
+            verdict = hook(msg, src, dst, t)
+            if verdict is not None:
+                reason = reason or verdict[0]
+                delay += verdict[1]
+        receiver = self._nodes.get(dst)
+        if not reason and (receiver is None or not receiver.connected):
+            reason = "unreachable"
+        if reason:
+            self._drop_log((t, tick, "drop", msg.msg_id, mtype, src, dst, nbytes, msg.t_sent_s, reason))
+            return
+        self._seq += 1
+        heapq.heappush(self._queue, (t + delay, tick, self._seq, dst, msg))
+
+    def deliver_due(self) -> None:
+        """Hand every message that has arrived by now (and was sent in an earlier tick) over."""
+        q, t, tick = self._queue, self._time.t_s + 1e-12, self._time.tick
+        while q and q[0][0] <= t and q[0][1] < tick:
+            arrival, _, _, dst, msg = heapq.heappop(q)
+            ep = self._nodes[dst]
+            if not ep.connected:
+                self._drop_log((arrival, tick, "drop", msg.msg_id, MESSAGE_TYPES[type(msg)], msg.src,
+                                dst, msg.nbytes, msg.t_sent_s, "unreachable"))
+                continue
+            ep.log((ep.clock.at(arrival), tick, "recv", msg.msg_id, MESSAGE_TYPES[type(msg)], msg.src,
+                    dst, msg.nbytes, msg.t_sent_s, ""))
+            ep.inbox.append(msg)

@@ -1,0 +1,1 @@
+"""Per-node logs: one declared, versioned schema; buffered, atomic Parquet writers."""

@@ -1,0 +1,1 @@
+"""Run SwarmBox experiments: ``python -m swarmbox.run [overrides]`` (Hydra; ``-m`` for sweeps)."""

@@ -1,0 +1,49 @@
+"""``python -m swarmbox.run``: one run, or a sweep with ``-m`` (Hydra multirun).
+
+Examples::
+
+    python -m swarmbox.run                                    # the default formation mission
+    python -m swarmbox.run algo=hover mission=hover seed=3
+    python -m swarmbox.run -m algo=hover,formation 'seed=range(3)'
+    python -m swarmbox.run -m hydra/launcher=joblib 'seed=range(20)'   # parallel, one job per core
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import hydra
+from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
+from omegaconf import DictConfig
+
+from swarmbox.run.config import GROUPS, register
+from swarmbox.run.runner import RunExistsError, execute, summary_line
+
+CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
+
+register()
+
+
+@hydra.main(config_path=CONF_DIR, config_name="config", version_base="1.3")
+def main(cfg: DictConfig) -> str:
+    hc = HydraConfig.get()
+    run_dir = Path(cfg.run.out_dir) if cfg.run.out_dir else Path(hc.runtime.output_dir)
+    choices = {g: str(hc.runtime.choices.get(g)) for g in GROUPS}
+    try:
+        manifest = execute(cfg, run_dir, choices, list(hc.overrides.task))
+    except RunExistsError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        sys.exit(2)
+    print(summary_line(manifest, run_dir), flush=True)
+    if manifest["status"] == "failed":
+        if manifest["traceback"]:
+            print(manifest["traceback"], file=sys.stderr)
+        if hc.mode != RunMode.MULTIRUN:
+            sys.exit(1)
+    return manifest["status"]
+
+
+if __name__ == "__main__":
+    main()

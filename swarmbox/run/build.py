@@ -1,0 +1,149 @@
+"""Turn a resolved config into a ready-to-run :class:`~swarmbox.core.swarm.Swarm`."""
+
+from __future__ import annotations
+
+import zlib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from hydra.utils import get_class, instantiate
+from omegaconf import DictConfig, OmegaConf
+
+from swarmbox.api import DroneAlgorithm, GroundAlgorithm
+from swarmbox.core.agent import AgentNode
+from swarmbox.core.clock import ClockSpec, NodeClock, TimeSource
+from swarmbox.core.ground import GroundNode
+from swarmbox.core.messages import GROUND_ID, NET_ID
+from swarmbox.core.node import CoreTiming
+from swarmbox.core.swarm import Swarm
+from swarmbox.core.topology import Topology, build
+from swarmbox.hal.safety import SafetyLimits
+from swarmbox.net.medium import LinkSpec, SimMedium
+from swarmbox.record.schema import node_name
+from swarmbox.record.writer import Recorder
+from swarmbox.run.mission import Mission
+
+
+class ConfigError(ValueError):
+    """A config value that type checking cannot catch (unknown node, bad class, ...)."""
+
+
+def rng_for(seed: int, stream: str) -> np.random.Generator:
+    """An independent generator per named consumer: adding a consumer never shifts the others."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(zlib.crc32(stream.encode()),)))
+
+
+def topology_of(cfg: DictConfig, mission: Mission) -> Topology:
+    t = cfg.topology
+    explicit = OmegaConf.to_container(t.superiors, resolve=True)
+    kind = t.kind
+    if kind == "mission":
+        explicit = mission.superiors or None
+        kind = "mission" if explicit else "centralized"
+    return build(kind, mission.drone_ids, leader=t.leader, branching=t.branching, explicit=explicit)
+
+
+def timing_of(cfg: DictConfig) -> CoreTiming:
+    r = cfg.run
+    if r.tick_hz <= 0:
+        raise ConfigError(f"run.tick_hz must be > 0, got {r.tick_hz}")
+    return CoreTiming(
+        tick_s=1.0 / r.tick_hz, lost_inferior_ticks=r.lost_inferior_ticks,
+        lost_superior_ticks=r.lost_superior_ticks, task_retry_ticks=r.task_retry_ticks,
+        task_max_retries=r.task_max_retries, arm_retry_ticks=r.arm_retry_ticks,
+        proximity_m=r.proximity_m, min_alive=r.min_alive, state_every_ticks=max(1, r.state_every_ticks),
+        timeouts_s=dict(OmegaConf.to_container(r.timeouts_s, resolve=True)))
+
+
+def clocks_of(cfg: DictConfig, mission: Mission) -> dict[int, ClockSpec]:
+    names = {node_name(i): i for i in [GROUND_ID, *mission.drone_ids]}
+    out = {}
+    for name, spec in cfg.run.clocks.items():
+        if name not in names:
+            raise ConfigError(f"run.clocks: unknown node '{name}' (nodes: {', '.join(names)})")
+        out[names[name]] = ClockSpec(spec.offset_s, spec.drift_ppm)
+    return out
+
+
+def medium_of(cfg: DictConfig, time: TimeSource, seed: int, recorder: Recorder,
+              mission: Mission) -> SimMedium:
+    n = cfg.network
+    known = {GROUND_ID, *mission.drone_ids}
+    links = {}
+    for link in n.links:
+        for end in (link.src, link.dst):
+            if end not in known:
+                raise ConfigError(f"network.links: unknown node {end} (known: {sorted(known)})")
+        links[(link.src, link.dst)] = LinkSpec(link.latency_ms / 1e3, link.jitter_ms / 1e3, link.loss_prob)
+    default = LinkSpec(n.latency_ms / 1e3, n.jitter_ms / 1e3, n.loss_prob)
+    return SimMedium(time, rng_for(seed, "network"), default, links,
+                     drop_log=recorder.node(NET_ID).appender("messages"))
+
+
+def backend_of(cfg: DictConfig, mission: Mission, tick_s: float, seed: int) -> Any:
+    params = OmegaConf.to_container(cfg.backend, resolve=True)
+    target = params.pop("_target_", None)
+    params.pop("name", None)
+    if not target:
+        raise ConfigError("backend: no _target_ (the backend class) given")
+    s = cfg.run.safety
+    limits = SafetyLimits(s.max_speed_m_s, s.max_accel_m_s2, s.geofence_radius_m, s.max_alt_m, s.max_jump_m)
+    homes = [mission.initial_positions[i] for i in mission.drone_ids]
+    try:
+        cls = get_class(target)
+    except Exception as exc:
+        raise ConfigError(f"backend._target_: cannot import '{target}': {exc}") from exc
+    return cls(homes_ned_m=homes, tick_s=tick_s, rng=rng_for(seed, "backend"),
+               obstacles=mission.obstacles, limits=limits, **params)
+
+
+def _algorithm(node: DictConfig | None, base: type, role: str) -> Any:
+    if node is None:
+        return base()
+    try:
+        alg = instantiate(node)
+    except Exception as exc:
+        raise ConfigError(f"algo.{role}: cannot create {node.get('_target_')}: {exc}") from exc
+    if not isinstance(alg, base):
+        raise ConfigError(f"algo.{role}: {type(alg).__name__} is not a {base.__name__}")
+    return alg
+
+
+def build_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> Swarm:
+    seed = int(cfg.seed)
+    timing = timing_of(cfg)
+    topo = topology_of(cfg, mission)
+    clocks = clocks_of(cfg, mission)
+    time = TimeSource()
+    medium = medium_of(cfg, time, seed, recorder, mission)
+    params = OmegaConf.to_container(cfg.algo.params, resolve=True)
+    info = mission.info()
+
+    def common(node_id: int) -> dict[str, Any]:
+        clock = NodeClock(time, clocks.get(node_id, ClockSpec()))
+        log = recorder.node(node_id)
+        inbox = medium.register(node_id, clock, log.appender("messages"))
+        return dict(time=time, clock=clock, net=medium, inbox=inbox, log=log, timing=timing,
+                    mission=info, params=params, rng=rng_for(seed, f"algo/{node_name(node_id)}"))
+
+    ground = GroundNode(_algorithm(cfg.algo.ground, GroundAlgorithm, "ground"), **common(GROUND_ID))
+    backend = backend_of(cfg, mission, timing.tick_s, seed)
+    agents = []
+    for i, vehicle in zip(mission.drone_ids, backend.vehicles, strict=True):
+        agents.append(AgentNode(i, superior=topo.superiors[i], vehicle=vehicle,
+                                algorithm=_algorithm(cfg.algo.drone, DroneAlgorithm, "drone"), **common(i)))
+    if cfg.topology.peers == "all":
+        for a in mission.drone_ids:
+            for b in mission.drone_ids:
+                if a != b:
+                    medium.subscribe(a, b)
+    elif cfg.topology.peers != "none":
+        raise ConfigError(f"topology.peers must be 'none' or 'all', got '{cfg.topology.peers}'")
+    event_logs = {i: recorder.node(i).appender("events") for i in mission.drone_ids}
+    return Swarm(time=time, tick_s=timing.tick_s, ground=ground, agents=agents, medium=medium,
+                 backend=backend, event_logs=event_logs)
+
+
+def run_dir_of(cfg: DictConfig, default: str | Path) -> Path:
+    return Path(cfg.run.out_dir) if cfg.run.out_dir else Path(default)

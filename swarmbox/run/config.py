@@ -1,0 +1,130 @@
+"""Typed schemas of the configuration (Hydra structured configs).
+
+Registered in Hydra's ConfigStore as ``base_config`` (the root config's first default), so a
+misspelt key or a wrong type in any group fails before the run starts, with a message that names
+the key. ``backend`` stays free-form: each backend's constructor names any key it does not know.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING
+
+GROUPS = ("algo", "mission", "topology", "backend", "network", "fault")
+
+
+@dataclass
+class AlgoConfig:
+    name: str = MISSING
+    drone: Any = MISSING            # {_target_: module.DroneClass}: one instance per drone
+    ground: Any = None              # {_target_: module.GroundClass}; None: a ground with no mission logic
+    params: dict[str, Any] = field(default_factory=dict)   # visible to both as ctx.params
+    metrics: list[Any] = field(default_factory=list)       # marker -> metric rules for the analyzer
+
+
+@dataclass
+class MissionConfig:
+    name: str = MISSING
+    file: Optional[str] = None      # a mission YAML in the original SwarmBox format (overrides below)
+    swarm_size: Optional[int] = None                        # default: number of initial positions
+    initial_positions: dict[int, list[float]] = field(default_factory=dict)  # id -> [n_m, e_m]
+    superiors: dict[int, int] = field(default_factory=dict)  # id -> superior id (-1 ground)
+    values: dict[int, list[float]] = field(default_factory=dict)  # mission data (e.g. packages)
+    obstacles: list[Any] = field(default_factory=list)     # static obstacles for the simulator
+    max_sim_time_s: float = 900.0   # hard stop of the run (s of simulated time)
+
+
+@dataclass
+class TopologyConfig:
+    kind: str = "mission"   # mission | centralized | leader_follower | chain | tree | explicit
+    leader: int = 0         # leader_follower
+    branching: int = 2      # tree
+    superiors: dict[int, int] = field(default_factory=dict)  # explicit
+    peers: str = "none"     # none | all: drones also hear each other's Heartbeats (ctx.peers)
+
+
+@dataclass
+class LinkConfig:
+    src: int = MISSING
+    dst: int = MISSING
+    latency_ms: float = 0.0
+    jitter_ms: float = 0.0
+    loss_prob: float = 0.0
+
+
+@dataclass
+class NetworkConfig:
+    name: str = "ideal"
+    latency_ms: float = 0.0     # one-way, every link
+    jitter_ms: float = 0.0      # extra uniform delay in [0, jitter_ms]
+    loss_prob: float = 0.0      # Bernoulli per message and destination
+    links: list[LinkConfig] = field(default_factory=list)   # per-link overrides
+
+
+@dataclass
+class FaultConfig:
+    name: str = "none"
+
+
+@dataclass
+class StageTimeouts:
+    ICEBREAK: float = 60.0      # s; a stage that overruns aborts the mission with a reason
+    PREPARATION: float = 60.0
+    EXECUTION: float = 900.0
+    LANDING: float = 120.0
+    TERMINATION: float = 10.0
+    ABORT: float = 120.0
+
+
+@dataclass
+class ClockConfig:
+    offset_s: float = 0.0       # local = true * (1 + drift_ppm * 1e-6) + offset_s
+    drift_ppm: float = 0.0
+
+
+@dataclass
+class SafetyConfig:
+    max_speed_m_s: float = 12.0
+    max_accel_m_s2: float = 5.0
+    geofence_radius_m: float = 500.0
+    max_alt_m: float = 120.0
+    max_jump_m: float = 1000.0
+
+
+@dataclass
+class RunConfig:
+    tick_hz: float = 40.0
+    timeouts_s: StageTimeouts = field(default_factory=StageTimeouts)
+    lost_inferior_ticks: int = 20   # no Report for this long: the inferior is lost
+    lost_superior_ticks: int = 40   # no Heartbeat for this long: hand over, or failsafe
+    task_retry_ticks: int = 8       # reliable TaskCommand re-send period
+    task_max_retries: int = 40
+    arm_retry_ticks: int = 20
+    proximity_m: float = 2.0        # ProxAlert radius
+    min_alive: int = 1              # fewer alive drones after ICEBREAK: abort
+    state_every_ticks: int = 1      # state-table sampling period
+    clocks: dict[str, ClockConfig] = field(default_factory=dict)  # node name -> clock error
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+    speed: float = 1.0              # real-time backends: wall-clock pacing factor (SITL speed-up)
+    progress: bool = True           # progress lines on stderr for long runs
+    out_dir: Optional[str] = None   # default: Hydra's output directory
+
+
+@dataclass
+class SwarmConfig:
+    seed: int = 0
+    algo: AlgoConfig = MISSING
+    mission: MissionConfig = MISSING
+    topology: TopologyConfig = MISSING
+    backend: Any = MISSING
+    network: NetworkConfig = MISSING
+    fault: FaultConfig = MISSING
+    run: RunConfig = field(default_factory=RunConfig)
+
+
+def register() -> None:
+    cs = ConfigStore.instance()
+    cs.store(name="base_config", node=SwarmConfig)

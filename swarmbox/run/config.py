@@ -33,6 +33,9 @@ class MissionConfig:
     initial_positions: dict[int, list[float]] = field(default_factory=dict)  # id -> [n_m, e_m]
     superiors: dict[int, int] = field(default_factory=dict)  # id -> superior id (-1 ground)
     values: dict[int, list[float]] = field(default_factory=dict)  # mission data (e.g. packages)
+    # A function that makes ``values`` from the run's seed: {_target_: module.fn, ...kwargs};
+    # called as fn(rng=<numpy Generator>, **kwargs) -> {int: [float, ...]}; replaces ``values``.
+    generator: Optional[Any] = None
     obstacles: list[Any] = field(default_factory=list)     # static obstacles for the simulator
     max_sim_time_s: float = 900.0   # hard stop of the run (s of simulated time)
 

@@ -7,10 +7,12 @@ The original format (``drone_config.initial_positions``, ``drone_config.superior
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+from hydra.utils import get_method
 from omegaconf import DictConfig, OmegaConf
 
 from swarmbox.api import MissionInfo
@@ -94,13 +96,34 @@ def load_legacy(path: str | Path, max_sim_time_s: float, obstacles: list) -> Mis
                       mission.get("swarm_size"), obstacles, max_sim_time_s, f"mission.file {p}")
 
 
-def load(cfg: DictConfig) -> Mission:
-    """The mission of a run config's ``mission`` group."""
+def load(cfg: DictConfig, rng: np.random.Generator | None = None) -> Mission:
+    """The mission of a run config's ``mission`` group (``rng`` feeds its generator, if any)."""
     m = cfg.mission
     obstacles = OmegaConf.to_container(m.obstacles, resolve=True)
     if m.file:
-        return load_legacy(m.file, m.max_sim_time_s, obstacles)
-    return from_parts(m.name, OmegaConf.to_container(m.initial_positions, resolve=True),
-                      OmegaConf.to_container(m.superiors, resolve=True),
-                      OmegaConf.to_container(m["values"], resolve=True), m.swarm_size, obstacles,
-                      m.max_sim_time_s, "mission")
+        mission = load_legacy(m.file, m.max_sim_time_s, obstacles)
+    else:
+        mission = from_parts(m.name, OmegaConf.to_container(m.initial_positions, resolve=True),
+                             OmegaConf.to_container(m.superiors, resolve=True),
+                             OmegaConf.to_container(m["values"], resolve=True), m.swarm_size, obstacles,
+                             m.max_sim_time_s, "mission")
+    if m.generator is not None:
+        mission = replace(mission, values=generate_values(m.generator, rng or np.random.default_rng(0)))
+    return mission
+
+
+def generate_values(spec: DictConfig, rng: np.random.Generator) -> dict[int, tuple[float, ...]]:
+    """Call the mission's ``generator`` and check what it returns."""
+    params = OmegaConf.to_container(spec, resolve=True)
+    target = params.pop("_target_", None)
+    if not target:
+        raise MissionError("mission.generator: no _target_ (the generating function) given")
+    try:
+        fn = get_method(target)
+    except Exception as exc:
+        raise MissionError(f"mission.generator: cannot import '{target}': {exc}") from exc
+    try:
+        raw = fn(rng=rng, **params)
+    except TypeError as exc:
+        raise MissionError(f"mission.generator {target}: {exc}") from exc
+    return from_parts("generated", {0: [0, 0]}, {}, raw, None, [], 0.0, f"mission.generator {target}").values

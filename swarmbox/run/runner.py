@@ -15,6 +15,7 @@ import subprocess
 import sys
 import time
 import traceback
+from collections.abc import Callable
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
@@ -75,8 +76,13 @@ def _progress(label: str):
     return report
 
 
-def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: list[str]) -> dict[str, Any]:
-    """Run one configuration into ``run_dir``; returns the manifest written as ``run.json``."""
+def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: list[str],
+            prepare: Callable[[Swarm], None] | None = None) -> dict[str, Any]:
+    """Run one configuration into ``run_dir``; returns the manifest written as ``run.json``.
+
+    ``prepare(swarm)`` is called once the swarm is built, before the first tick (programmatic use:
+    schedule events with ``swarm.schedule``).
+    """
     run_dir.mkdir(parents=True, exist_ok=True)
     if (run_dir / "run.json").exists():
         raise RunExistsError(f"{run_dir} already holds a finished run; refusing to overwrite it")
@@ -93,10 +99,12 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
     recorder = Recorder(run_dir)
     swarm = None
     try:
-        m = mission.load(cfg)
+        m = mission.load(cfg, build.rng_for(int(cfg.seed), "dataset"))
         manifest["n_drones"] = m.swarm_size
         manifest["nodes"] = [node_name(i) for i in [GROUND_ID, *m.drone_ids]]
         swarm = build.build_swarm(cfg, m, recorder)
+        if prepare is not None:
+            prepare(swarm)
         label = f"{choices.get('algo', '?')} seed={cfg.seed}"
         progress = _progress(label) if cfg.run.progress else None
 

@@ -1,0 +1,53 @@
+"""Shared fixtures: compose a run config exactly as ``python -m swarmbox.run`` does, and run it."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
+from omegaconf import DictConfig, open_dict
+
+from swarmbox.run.config import GROUPS, register
+from swarmbox.run.runner import execute
+
+ROOT = Path(__file__).resolve().parents[1]
+CONF = ROOT / "conf"
+
+register()
+
+
+def compose_config(overrides: list[str] | tuple[str, ...] = ()) -> tuple[DictConfig, dict[str, str]]:
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose("config", overrides=list(overrides), return_hydra_config=True)
+    choices = {g: str(cfg.hydra.runtime.choices.get(g)) for g in GROUPS}
+    with open_dict(cfg):
+        del cfg["hydra"]
+    return cfg, choices
+
+
+def run_config(run_dir: Path, overrides: list[str] | tuple[str, ...] = (), prepare=None) -> dict:
+    """Compose and execute one run in-process; returns run.json."""
+    cfg, choices = compose_config([*overrides, "run.progress=false"])
+    execute(cfg, run_dir, choices, list(overrides), prepare)
+    return json.loads((run_dir / "run.json").read_text())
+
+
+@pytest.fixture
+def run(tmp_path):
+    counter = iter(range(1000))
+
+    def _run(*overrides: str, name: str | None = None, prepare=None) -> tuple[dict, Path]:
+        run_dir = tmp_path / (name or f"run{next(counter)}")
+        return run_config(run_dir, overrides, prepare), run_dir
+
+    return _run
+
+
+def table(run_dir: Path, node: str, name: str):
+    import pandas as pd
+
+    return pd.read_parquet(run_dir / "logs" / node / f"{name}.parquet")

@@ -1,0 +1,44 @@
+"""Logic-environment isolation: the import walls of the architecture."""
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+ALLOWED_IN_ALGORITHMS = {"swarmbox.api", "math", "numpy", "scipy", "typing", "collections", "dataclasses",
+                         "itertools", "functools", "enum", "__future__", "heapq", "bisect", "random"}
+FORBIDDEN_IN_CORE = {"pymunk", "pymavlink", "hydra", "omegaconf", "pandas", "matplotlib", "seaborn"}
+
+
+def imports(path: Path) -> set[str]:
+    mods = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            mods.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            mods.add(node.module)
+    return mods
+
+
+def test_algorithms_import_only_the_api():
+    for path in sorted((ROOT / "algorithms").rglob("*.py")):
+        for mod in imports(path):
+            if mod.startswith("swarmbox"):
+                assert mod == "swarmbox.api", f"{path.name} imports {mod}"
+            else:
+                assert mod.split(".")[0] in {m.split(".")[0] for m in ALLOWED_IN_ALGORITHMS}, (path.name, mod)
+
+
+def test_core_imports_no_backend_config_or_analysis_library():
+    for path in sorted((ROOT / "swarmbox" / "core").rglob("*.py")):
+        for mod in imports(path):
+            assert mod.split(".")[0] not in FORBIDDEN_IN_CORE, f"{path.name} imports {mod}"
+
+
+def test_runtime_does_not_load_analysis_libraries():
+    code = ("import sys, swarmbox.core.swarm, swarmbox.api, swarmbox.net.medium;"
+            "bad = {'pandas', 'matplotlib', 'seaborn', 'pymunk', 'hydra', 'pymavlink'} & set(sys.modules);"
+            "print(sorted(bad)); sys.exit(1 if bad else 0)")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr

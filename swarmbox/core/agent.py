@@ -55,7 +55,7 @@ class AgentNode(Node):
         self.retry_tasks()
         if self.time.tick % self.timing.state_every_ticks == 0:
             self._record_state(tel)
-        if self.stage in TERMINAL and (tel.landed or not tel.armed):
+        if self.stage in TERMINAL and (not tel.armed or self.stage_timed_out()):
             self.finished = True
 
     def _drain_inbox(self) -> None:
@@ -110,6 +110,8 @@ class AgentNode(Node):
             vehicle.arm()
         elif stage is Stage.LANDING:
             vehicle.land()
+        elif stage is Stage.TERMINATION and self.telemetry.armed:
+            vehicle.disarm()
         elif stage is Stage.ABORT:
             self.reason = reason
             tel = self.telemetry
@@ -133,10 +135,9 @@ class AgentNode(Node):
                 self._exec_done = complete
                 self.event("progress", "exec_complete" if complete else "exec_incomplete", self.node_id)
             return complete
-        if stage is Stage.LANDING:
-            return tel.landed
-        if stage is Stage.ABORT:
-            return tel.landed or not tel.armed
+        if stage in (Stage.LANDING, Stage.ABORT):
+            return tel.landed and not tel.armed  # touched down and disarmed by the autopilot
+
         return True  # ICEBREAK, TERMINATION
 
     def _fly(self, sp: Setpoint) -> None:

@@ -7,6 +7,7 @@ import json
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any, Protocol
 
 import numpy as np
@@ -92,6 +93,8 @@ class Node:
         self.stage_tick = 0
         self.finished = False
         self.inferiors: dict[int, _Inferior] = {}
+        self._alive: dict[int, Report] = {}          # latest Report of each alive inferior
+        self._alive_view = MappingProxyType(self._alive)
         self._seq = 0
         self._task_seq: dict[int, int] = {}
         self._pending: dict[tuple[int, int], _Pending] = {}
@@ -135,6 +138,7 @@ class Node:
                 inf.alive = True
                 self.event("topology", "inferior_rejoined", rep.src)
             inf.report, inf.silent_ticks = rep, 0
+        self._alive[rep.src] = rep
         return True
 
     def age_inferiors(self) -> None:
@@ -143,11 +147,13 @@ class Node:
             inf.silent_ticks += 1
             if inf.alive and inf.silent_ticks > limit:
                 inf.alive = False
+                del self._alive[drone_id]
                 self.event("topology", "inferior_lost", drone_id, silent_ticks=inf.silent_ticks)
                 self._forget_pending(drone_id)
 
-    def alive_reports(self) -> dict[int, Report]:
-        return {i: inf.report for i, inf in self.inferiors.items() if inf.alive}
+    def alive_reports(self) -> Mapping[int, Report]:
+        """Read-only view of the latest Report of each alive direct inferior."""
+        return self._alive_view
 
     def inferiors_complete(self) -> bool:
         """Every alive direct inferior reports complete *for this node's current stage*."""

@@ -10,6 +10,7 @@ and never earlier than tick k+1. All randomness comes from the generator given a
 from __future__ import annotations
 
 import heapq
+from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
@@ -60,7 +61,8 @@ class SimMedium:
         self._drop_log = drop_log or (lambda row: None)
         self._nodes: dict[int, _Endpoint] = {}
         self._subscribers: dict[int, list[int]] = {}
-        self._queue: list = []
+        self._queue: list = []            # (arrival, tick, seq, dst, msg, type, nbytes), a heap
+        self._fifo: deque = deque()       # same items, for messages with the default constant delay
         self._seq = 0
         self.hooks: list[LinkHook] = []
 
@@ -102,17 +104,13 @@ class SimMedium:
         sender = self._nodes[src]
         if not sender.connected:
             return
-        t = self._time.t_s
-        mtype = MESSAGE_TYPES[type(msg)]
-        nbytes = msg.nbytes
-        tick = self._time.tick
-        sender.log((sender.clock.now(), tick, "send", msg.msg_id, mtype, src, dst, nbytes,
-                    msg.t_sent_s, ""))
-        spec = self._links.get((src, dst), self._default)
-        delay = spec.latency_s
+        t, tick = self._time.t_s, self._time.tick
+        mtype, nbytes = MESSAGE_TYPES[type(msg)], msg.nbytes
+        sender.log((sender.clock.now(), tick, "send", msg.msg_id, mtype, src, dst, nbytes, msg.t_sent_s, ""))
+        spec = self._links.get((src, dst), self._default) if self._links else self._default
+        delay, reason = spec.latency_s, ""
         if spec.jitter_s:
             delay += spec.jitter_s * self._rng.random()
-        reason = ""
         if spec.loss_prob and self._rng.random() < spec.loss_prob:
             reason = "loss"
         for hook in self.hooks:
@@ -126,19 +124,29 @@ class SimMedium:
         if reason:
             self._drop_log((t, tick, "drop", msg.msg_id, mtype, src, dst, nbytes, msg.t_sent_s, reason))
             return
-        self._seq += 1
-        heapq.heappush(self._queue, (t + delay, tick, self._seq, dst, msg))
+        item = (t + delay, tick, 0, dst, msg, mtype, nbytes)
+        if delay == self._default.latency_s and not self._default.jitter_s:
+            self._fifo.append(item)   # same delay as everything else in the FIFO: arrival order kept
+        else:
+            self._seq += 1
+            heapq.heappush(self._queue, (t + delay, tick, self._seq, dst, msg, mtype, nbytes))
 
     def deliver_due(self) -> None:
         """Hand every message that has arrived by now (and was sent in an earlier tick) over."""
-        q, t, tick = self._queue, self._time.t_s + 1e-12, self._time.tick
+        t, tick = self._time.t_s + 1e-12, self._time.tick
+        fifo, q = self._fifo, self._queue
+        while fifo and fifo[0][0] <= t and fifo[0][1] < tick:
+            self._hand_over(fifo.popleft(), tick)
         while q and q[0][0] <= t and q[0][1] < tick:
-            arrival, _, _, dst, msg = heapq.heappop(q)
-            ep = self._nodes[dst]
-            if not ep.connected:
-                self._drop_log((arrival, tick, "drop", msg.msg_id, MESSAGE_TYPES[type(msg)], msg.src,
-                                dst, msg.nbytes, msg.t_sent_s, "unreachable"))
-                continue
-            ep.log((ep.clock.at(arrival), tick, "recv", msg.msg_id, MESSAGE_TYPES[type(msg)], msg.src,
-                    dst, msg.nbytes, msg.t_sent_s, ""))
-            ep.inbox.append(msg)
+            self._hand_over(heapq.heappop(q), tick)
+
+    def _hand_over(self, item: tuple, tick: int) -> None:
+        arrival, _, _, dst, msg, mtype, nbytes = item
+        ep = self._nodes[dst]
+        if not ep.connected:
+            self._drop_log((arrival, tick, "drop", msg.msg_id, mtype, msg.src, dst, nbytes, msg.t_sent_s,
+                            "unreachable"))
+            return
+        ep.log((ep.clock.at(arrival), tick, "recv", msg.msg_id, mtype, msg.src, dst, nbytes,
+                msg.t_sent_s, ""))
+        ep.inbox.append(msg)

@@ -36,7 +36,7 @@ def rng_for(seed: int, stream: str) -> np.random.Generator:
 
 def topology_of(cfg: DictConfig, mission: Mission) -> Topology:
     t = cfg.topology
-    explicit = OmegaConf.to_container(t.superiors, resolve=True)
+    explicit = OmegaConf.to_container(t.superiors, resolve=True) if t.superiors is not None else None
     kind = t.kind
     if kind == "mission":
         explicit = mission.superiors or None

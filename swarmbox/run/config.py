@@ -30,9 +30,11 @@ class MissionConfig:
     name: str = MISSING
     file: Optional[str] = None      # a mission YAML in the original SwarmBox format (overrides below)
     swarm_size: Optional[int] = None                        # default: number of initial positions
-    initial_positions: dict[int, list[float]] = field(default_factory=dict)  # id -> [n_m, e_m]
-    superiors: dict[int, int] = field(default_factory=dict)  # id -> superior id (-1 ground)
-    values: dict[int, list[float]] = field(default_factory=dict)  # mission data (e.g. packages)
+    # The maps below are checked when the mission loads (so that a whole map can also be given on
+    # the command line, e.g. mission.initial_positions='{0:[0,0],1:[5,0]}').
+    initial_positions: Optional[Any] = None   # id -> [n_m, e_m]
+    superiors: Optional[Any] = None           # id -> superior id (-1 ground)
+    values: Optional[Any] = None              # id -> list of numbers: mission data (e.g. packages)
     # A function that makes ``values`` from the run's seed: {_target_: module.fn, ...kwargs};
     # called as fn(rng=<numpy Generator>, **kwargs) -> {int: [float, ...]}; replaces ``values``.
     generator: Optional[Any] = None
@@ -45,7 +47,7 @@ class TopologyConfig:
     kind: str = "mission"   # mission | centralized | leader_follower | chain | tree | explicit
     leader: int = 0         # leader_follower
     branching: int = 2      # tree
-    superiors: dict[int, int] = field(default_factory=dict)  # explicit
+    superiors: Optional[Any] = None   # explicit: id -> superior id (-1 ground)
     peers: str = "none"     # none | all: drones also hear each other's Heartbeats (ctx.peers)
 
 

@@ -103,13 +103,20 @@ def load(cfg: DictConfig, rng: np.random.Generator | None = None) -> Mission:
     if m.file:
         mission = load_legacy(m.file, m.max_sim_time_s, obstacles)
     else:
-        mission = from_parts(m.name, OmegaConf.to_container(m.initial_positions, resolve=True),
-                             OmegaConf.to_container(m.superiors, resolve=True),
-                             OmegaConf.to_container(m["values"], resolve=True), m.swarm_size, obstacles,
-                             m.max_sim_time_s, "mission")
+        mission = from_parts(m.name, _mapping(m, "initial_positions"), _mapping(m, "superiors"),
+                             _mapping(m, "values"), m.swarm_size, obstacles, m.max_sim_time_s, "mission")
     if m.generator is not None:
         mission = replace(mission, values=generate_values(m.generator, rng or np.random.default_rng(0)))
     return mission
+
+
+def _mapping(node: DictConfig, key: str) -> dict:
+    value = node[key]
+    if value is None:
+        return {}
+    if not OmegaConf.is_dict(value):
+        raise MissionError(f"mission.{key} must be a mapping of drone id -> value, got {value!r}")
+    return OmegaConf.to_container(value, resolve=True)
 
 
 def generate_values(spec: DictConfig, rng: np.random.Generator) -> dict[int, tuple[float, ...]]:

@@ -25,7 +25,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from swarmbox import __version__
 from swarmbox.core.messages import GROUND_ID
-from swarmbox.core.swarm import Swarm
+from swarmbox.core.swarm import Swarm, gc_paused
 from swarmbox.record.schema import SCHEMA_VERSION, node_name
 from swarmbox.record.writer import Recorder
 from swarmbox.run import build, mission
@@ -128,7 +128,8 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
                 swarm.backend.close()
         finally:
             try:
-                recorder.close()
+                with gc_paused():
+                    recorder.close()
             except OSError as exc:
                 manifest.update(status="failed", reason=f"{manifest['reason']}; {exc}".strip("; "))
             write_atomic(run_dir / "run.json", json.dumps(manifest, indent=2, sort_keys=True))

@@ -22,10 +22,14 @@ def test_wrong_type_names_the_key():
     assert "lost_inferior_ticks" in str(err.value) + str(err.value.__cause__)
 
 
-def test_misspelt_key_inside_a_group_file_is_caught():
+def test_misspelt_key_inside_a_group_file_is_caught(tmp_path):
+    (tmp_path / "mission").mkdir()
+    (tmp_path / "mission" / "typo.yaml").write_text(
+        "name: typo\nswarmsize: 2\ninitial_positions: {0: [0, 0], 1: [5, 0]}\n")
     with pytest.raises((ConfigCompositionException, ConfigKeyError)) as err:
-        compose_config(["+mission.swarmsize=4"])
-    assert "swarmsize" in str(err.value) + str(err.value.__cause__)
+        compose_config([f"hydra.searchpath=[file://{tmp_path}]", "mission=typo"])
+    message = str(err.value) + str(err.value.__cause__)
+    assert "swarmsize" in message and "typo" in message
 
 
 def test_legacy_mission_file_loads_unchanged():

@@ -14,6 +14,7 @@ from swarmbox.core.stages import TERMINAL, Stage, path_to
 
 _KIND_NAMES = {SetpointKind.POSITION: "position", SetpointKind.VELOCITY: "velocity",
                SetpointKind.ACCELERATION: "acceleration"}
+_LOOP_HOOK = {Stage.PREPARATION: "prep_loop/prep_complete", Stage.EXECUTION: "exec_loop/exec_complete"}
 _NAN = float("nan")
 _NAN3 = (_NAN, _NAN, _NAN)
 
@@ -127,8 +128,7 @@ class AgentNode(Node):
             if (stage is Stage.EXECUTION and not tel.armed
                     and self.stage_tick % self.timing.arm_retry_ticks == 0):
                 self.vehicle.arm()
-            complete, sp = call_hook(self, f"{stage.name.lower()} loop", self.algorithm.run_stage, stage,
-                                     self.ctx)
+            complete, sp = call_hook(self, _LOOP_HOOK[stage], self.algorithm.run_stage, stage, self.ctx)
             if sp is not None:
                 self._fly(sp)
             if stage is Stage.EXECUTION and complete != self._exec_done:

@@ -37,8 +37,11 @@ class GroundNode(Node):
                                    _ZERO3, _ZERO3))
         self._proximity_alerts()
         stage = self.stage
-        satisfied = call_hook(self, f"{stage.name.lower()} loop", self.algorithm.run_stage, stage,
-                              self.ctx) if stage in (Stage.PREPARATION, Stage.EXECUTION) else True
+        satisfied = True
+        if stage is Stage.PREPARATION:
+            satisfied = call_hook(self, "prep_loop", self.algorithm.run_stage, stage, self.ctx)
+        elif stage is Stage.EXECUTION:
+            satisfied = call_hook(self, "exec_loop/exec_complete", self.algorithm.run_stage, stage, self.ctx)
         self.age_inferiors()
         self.retry_tasks()
         self._advance(satisfied)

@@ -18,8 +18,9 @@ Vec3 = tuple[float, float, float]
 class VehicleEvent(NamedTuple):
     """Something a backend observed that belongs in the logs.
 
-    ``kind`` is one of ``collision``, ``safety``, ``command``, ``link`` or ``fault``; ``name`` says
-    what happened (e.g. ``setpoint_refused``, ``drone_drone``, ``nack``); ``data`` holds details.
+    ``kind`` is one of ``collision``, ``safety``, ``command``, ``estimator``, ``link`` or ``fault``;
+    ``name`` says what happened (e.g. ``setpoint_refused``, ``drone_drone``, ``nack``); ``data``
+    holds details.
     """
 
     t_s: float

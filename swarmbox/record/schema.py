@@ -77,7 +77,8 @@ TABLES: dict[str, tuple[Column, ...]] = {
     # Markers, safety interventions, collisions, faults, losses, handovers, failsafes, errors.
     "events": _cols(
         _T, _TICK,
-        ("kind", "string", "", "marker | safety | collision | fault | topology | failsafe | error"),
+        ("kind", "string", "", "marker | progress | safety | collision | command | estimator | link | "
+                               "fault | topology | failsafe | error"),
         ("name", "string", "", "what happened"),
         ("subject", "int16", "", "drone the event is about (-1 ground, -3 none)"),
         ("data", "string", "", "JSON object with the event's fields"),

@@ -1,0 +1,23 @@
+"""Conformance suites shipped with SwarmBox, for its own plug-ins and for yours.
+
+:mod:`swarmbox.testing.backend_suite` holds the checks every backend must pass.
+"""
+
+from swarmbox.testing.backend_suite import (
+    BACKEND_CHECKS,
+    BackendFactory,
+    Flight,
+    check_disarmed_setpoint_ignored,
+    check_hold_stops,
+    check_mission_cycle,
+    check_nonfinite_setpoint_refused,
+    check_protocol,
+    check_return_to_launch,
+    run_backend_suite,
+)
+
+__all__ = [
+    "BACKEND_CHECKS", "BackendFactory", "Flight", "check_disarmed_setpoint_ignored", "check_hold_stops",
+    "check_mission_cycle", "check_nonfinite_setpoint_refused", "check_protocol", "check_return_to_launch",
+    "run_backend_suite",
+]

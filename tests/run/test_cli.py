@@ -21,11 +21,12 @@ def test_sweep_runs_every_job_in_its_own_directory(tmp_path):
     combos = {(m["choices"]["algo"], m["seed"]) for m in manifests}
     assert combos == {(a, s) for a in ("hover", "formation") for s in range(3)}
     assert "sweep" in proc.stdout and "6 runs" in proc.stdout
+    assert (tmp_path / "tables").is_dir() and (tmp_path / "figures").is_dir()  # analysed at the end
 
 
 def test_joblib_launcher_runs_jobs_in_parallel_processes(tmp_path):
     proc = swarmbox_run("-m", "hydra/launcher=joblib", "algo=hover", "mission=hover", "seed=0,1",
-                        f"hydra.sweep.dir={tmp_path}")
+                        f"hydra.sweep.dir={tmp_path}", "~hydra.callbacks.analyze")
     assert proc.returncode == 0, proc.stderr[-3000:]
     statuses = [json.loads(p.read_text())["status"] for p in tmp_path.glob("*/run.json")]
     assert statuses == ["ok", "ok"]
@@ -44,7 +45,8 @@ def test_failed_run_exits_non_zero_but_a_sweep_continues(tmp_path):
     assert single.returncode == 1 and "deliberate failure" in single.stderr
     assert json.loads((tmp_path / "single" / "run.json").read_text())["status"] == "failed"
     sweep = swarmbox_run("-m", "algo=hover", "mission=hover", "algo.drone._target_=tests.run.algos."
-                         "CrashingDrone,algorithms.hover.HoverDrone", f"hydra.sweep.dir={tmp_path / 'sw'}")
+                         "CrashingDrone,algorithms.hover.HoverDrone", f"hydra.sweep.dir={tmp_path / 'sw'}",
+                         "~hydra.callbacks.analyze")
     statuses = sorted(json.loads(p.read_text())["status"] for p in (tmp_path / "sw").glob("*/run.json"))
     assert statuses == ["failed", "ok"]
     assert sweep.returncode == 1

@@ -171,12 +171,13 @@ def load_run(run_dir: str | Path) -> RunData:
     problems: list[str] = []
     config = read_config(run_dir, problems)
     dirs = _node_dirs(run_dir, problems)
+    incomplete = False
     for name in manifest.get("nodes", []):
         nid = node_id(str(name))
         if nid is not None and nid not in dirs:
             problems.append(f"node {name} listed in run.json has no logs")
+            incomplete |= bool(REQUIRED.get(node_kind(nid)))
     parts: dict[str, list[pd.DataFrame]] = {t: [] for t in TABLES}
-    incomplete = False
     for nid, ndir in dirs.items():
         kind = node_kind(nid)
         for table in TABLES:

@@ -5,9 +5,10 @@ row, matched on ``(msg_id, dst)`` with the receiving node as ``dst``. Definition
 
 - latency of a delivered message = unified receive time - unified send time (ms);
 - a send with no matching receive is *lost*, except when it was still *in flight* at the end of the
-  run (sent later than ``t_end - max latency seen on that link``, ``t_end`` the last message record) or
-  its destination wrote no messages table at all (nothing can be said): both are left out of the
-  counts. ``drop`` rows of the network (node ``net``) give the reason but are not needed to count;
+  run (sent later than ``t_end - max latency seen on that link - one tick``, ``t_end`` the last
+  message record, and no ``drop`` row of the network says otherwise) or its destination wrote no
+  messages table at all (nothing can be said): both are left out of the counts. ``drop`` rows of
+  the network (node ``net``) give the reason (``drop_reason``) but are not needed to count;
 - loss ratio = lost / (delivered + lost), per link (src, dst) or per agent (messages it sent or that
   were sent to it);
 - bytes/s of an agent = bytes it sent (``tx``) or received (``rx``) in the interval / interval length;
@@ -27,8 +28,12 @@ from swarmbox.analysis.unify import T
 _LAT = "latency_ms"
 
 
-def message_flow(messages: pd.DataFrame) -> pd.DataFrame:
-    """One row per (message, destination): send/receive times, latency, delivered / lost / in flight."""
+def message_flow(messages: pd.DataFrame, tick_s: float = 0.0) -> pd.DataFrame:
+    """One row per (message, destination): send/receive times, latency, delivered / lost / in flight.
+
+    ``tick_s``: a message is handled at the first tick after its arrival, so one more tick of
+    margin is given to messages at the end of the run.
+    """
     sends = messages[messages["kind"] == "send"]
     flow = pd.DataFrame({
         "msg_id": sends["msg_id"].astype("int64"), "type": sends["type"].astype("str"),
@@ -48,7 +53,8 @@ def message_flow(messages: pd.DataFrame) -> pd.DataFrame:
     logged = set(messages.loc[messages["node"] != NET, "node"].astype("int64").unique())
     t_end = float(messages[T].max()) if len(messages) else np.nan
     max_lat = flow.groupby(["src", "dst"])[_LAT].transform("max").fillna(0.0) / 1e3
-    in_flight = ~flow["delivered"] & (flow["t_send"] > t_end - max_lat)
+    late = flow["t_send"] > t_end - max_lat - (tick_s if np.isfinite(tick_s) else 0.0)
+    in_flight = ~flow["delivered"] & flow["drop_reason"].isna() & late
     flow["counted"] = flow["dst"].isin(logged) & ~in_flight
     flow["lost"] = flow["counted"] & ~flow["delivered"]
     return flow.sort_values(["t_send", "msg_id", "dst"]).reset_index(drop=True)
@@ -59,53 +65,51 @@ def between(flow: pd.DataFrame, t0: float, t1: float) -> pd.DataFrame:
     return flow[(flow["t_send"] >= t0) & (flow["t_send"] <= t1)]
 
 
-def _stats(group: pd.DataFrame, span_s: float) -> pd.Series:
-    counted = group[group["counted"]]
-    lat = group.loc[group["delivered"], _LAT]
-    sent, lost = len(counted), int(counted["lost"].sum())
-    return pd.Series({
-        "sent": sent, "delivered": int(group["delivered"].sum()), "lost": lost,
-        "loss_ratio": lost / sent if sent else np.nan,
-        "latency_ms_mean": lat.mean(), "latency_ms_p50": lat.quantile(0.5),
-        "latency_ms_p95": lat.quantile(0.95), "latency_ms_max": lat.max(),
-        "bytes_per_s": group["nbytes"].sum() / span_s if span_s > 0 else np.nan,
+def grouped_stats(frame: pd.DataFrame, keys: list[str], span_s: float) -> pd.DataFrame:
+    """Counts, loss ratio, latency mean/p50/p95/max and bytes/s of ``frame`` grouped by ``keys``."""
+    grouped = frame.groupby(keys)
+    out = pd.DataFrame({
+        "sent": grouped["counted"].sum().astype("int64"),
+        "delivered": grouped["delivered"].sum().astype("int64"),
+        "lost": grouped["lost"].sum().astype("int64"),
     })
+    out["loss_ratio"] = (out["lost"] / out["sent"]).where(out["sent"] > 0)
+    lat = frame[frame["delivered"]].groupby(keys)[_LAT]
+    out["latency_ms_mean"] = lat.mean()
+    out["latency_ms_p50"] = lat.quantile(0.5)
+    out["latency_ms_p95"] = lat.quantile(0.95)
+    out["latency_ms_max"] = lat.max()
+    out["bytes_per_s"] = grouped["nbytes"].sum() / span_s if span_s > 0 else np.nan
+    return out
 
 
 def link_stats(flow: pd.DataFrame, span_s: float) -> pd.DataFrame:
     """Per directed link (src, dst): counts, loss ratio, latency mean/p50/p95/max, bytes/s."""
-    if flow.empty:
-        return pd.DataFrame(columns=["src", "dst", "sent", "lost", "loss_ratio", "latency_ms_mean"])
-    out = flow.groupby(["src", "dst"])[list(flow.columns)].apply(_stats, span_s=span_s)
-    return out.reset_index()
+    return grouped_stats(flow, ["src", "dst"], span_s).reset_index()
 
 
 def touching(flow: pd.DataFrame) -> pd.DataFrame:
-    """Each message twice: once for its sender (``agent`` = src, ``role`` tx), once for its destination."""
-    tx = flow.assign(agent=flow["src"], role="tx")
-    rx = flow.assign(agent=flow["dst"], role="rx")
-    return pd.concat([tx, rx], ignore_index=True)
+    """Each message twice: once for its sender (``agent`` = src), once for its destination."""
+    return pd.concat([flow.assign(agent=flow["src"]), flow.assign(agent=flow["dst"])], ignore_index=True)
 
 
 def agent_stats(flow: pd.DataFrame, span_s: float) -> pd.DataFrame:
     """Per agent, over the messages it sent or that were sent to it; plus tx/rx bytes per second."""
-    both = touching(flow)
-    if both.empty:
-        return pd.DataFrame(columns=["agent", "sent", "lost", "loss_ratio", "latency_ms_mean"])
-    out = both.groupby("agent")[list(both.columns)].apply(_stats, span_s=span_s).drop(columns="bytes_per_s")
-    tx = flow.groupby("src")["nbytes"].sum()
-    rx = flow[flow["delivered"]].groupby("dst")["nbytes"].sum()
-    out["tx_bytes_per_s"] = (tx.reindex(out.index).fillna(0.0) / span_s) if span_s > 0 else np.nan
-    out["rx_bytes_per_s"] = (rx.reindex(out.index).fillna(0.0) / span_s) if span_s > 0 else np.nan
+    out = grouped_stats(touching(flow), ["agent"], span_s).drop(columns="bytes_per_s")
+    tx = flow.groupby("src")["nbytes"].sum().reindex(out.index).fillna(0.0)
+    rx = flow[flow["delivered"]].groupby("dst")["nbytes"].sum().reindex(out.index).fillna(0.0)
+    out["tx_bytes_per_s"] = tx / span_s if span_s > 0 else np.nan
+    out["rx_bytes_per_s"] = rx / span_s if span_s > 0 else np.nan
     return out.reset_index()
 
 
-def overall_stats(flow: pd.DataFrame, span_s: float) -> dict[str, float]:
+def overall_stats(flow: pd.DataFrame) -> dict[str, float]:
     """Run-level latency and loss over every message of ``flow``."""
+    names = ["loss_ratio", "latency_ms_mean", "latency_ms_p50", "latency_ms_p95", "latency_ms_max"]
     if flow.empty:
-        return {"latency_ms_mean": np.nan, "loss_ratio": np.nan}
-    stats = _stats(flow, span_s).drop(["sent", "delivered", "lost", "bytes_per_s"])
-    return {k: float(v) for k, v in stats.items()}
+        return dict.fromkeys(names, np.nan)
+    row = grouped_stats(flow.assign(_all=0), ["_all"], 0.0).iloc[0]
+    return {k: float(row[k]) for k in names}
 
 
 def algebraic_connectivity(nodes: list[int], edges: set[tuple[int, int]]) -> float:
@@ -123,7 +127,7 @@ def algebraic_connectivity(nodes: list[int], edges: set[tuple[int, int]]) -> flo
 
 
 def connectivity_timeline(flow: pd.DataFrame, nodes: list[int], window_s: float) -> pd.DataFrame:
-    """Algebraic connectivity of the communication graph per window: columns t_u (window start), value."""
+    """Algebraic connectivity of the communication graph per window: t_u (window end), connectivity."""
     nodes = sorted(n for n in nodes if n != NET)
     got = flow[flow["delivered"]]
     if got.empty:
@@ -136,5 +140,5 @@ def connectivity_timeline(flow: pd.DataFrame, nodes: list[int], window_s: float)
     for win in range(int(w.min()), int(w.max()) + 1):
         part = grouped.get(win)
         edges = set(zip(part["a"], part["b"], strict=True)) if part is not None else set()
-        rows.append({T: win * window_s, "connectivity": algebraic_connectivity(nodes, edges)})
+        rows.append({T: (win + 1) * window_s, "connectivity": algebraic_connectivity(nodes, edges)})
     return pd.DataFrame(rows)

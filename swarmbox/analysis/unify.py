@@ -62,11 +62,12 @@ def clock_samples(messages: pd.DataFrame) -> pd.DataFrame:
     })
 
 
-def _window_minima(samples: pd.DataFrame, a: int, b: int, window_s: float) -> pd.DataFrame:
-    """Per window on a's clock: min forward (a->b) and min backward (b->a) sample and the window middle."""
-    fwd = samples[(samples["a"] == a) & (samples["b"] == b)]
-    bwd = samples[(samples["a"] == b) & (samples["b"] == a)]
-    # both directions on a's clock: a's send time for a->b, a's receive time for b->a
+def window_minima(fwd: pd.DataFrame, bwd: pd.DataFrame, window_s: float) -> pd.DataFrame:
+    """Per window on a's clock: min forward (a->b) and backward (b->a) sample and the window middle.
+
+    ``fwd`` holds the samples of a->b messages, ``bwd`` those of b->a; both are placed on a's clock
+    (a's send time for a->b, a's receive time for b->a).
+    """
     parts = pd.concat([
         pd.DataFrame({"t": fwd["t_a"], "fwd": fwd["sample"], "bwd": np.nan}),
         pd.DataFrame({"t": bwd["t_b"], "fwd": np.nan, "bwd": bwd["sample"]}),
@@ -78,20 +79,25 @@ def _window_minima(samples: pd.DataFrame, a: int, b: int, window_s: float) -> pd
     return out.reset_index(drop=True)
 
 
-def estimate_pair(samples: pd.DataFrame, a: int, b: int, opts: ClockOptions,
-                  typical_delay_s: float = 0.0) -> PairEstimate | None:
-    """Relative clock of b with respect to a from the messages they exchanged."""
-    win = _window_minima(samples, a, b, opts.window_s)
+def two_way_estimate(a: int, b: int, win: pd.DataFrame, opts: ClockOptions) -> PairEstimate | None:
+    """Relative clock of b with respect to a from the windows where both directions were heard."""
     both = win.dropna(subset=["fwd", "bwd"])
-    if len(both):
-        rel = ((both["fwd"] - both["bwd"]) / 2).to_numpy()
-        delay = float(np.median((both["fwd"] + both["bwd"]) / 2))
-        t_mid = both["t_mid"].to_numpy()
-        if len(both) >= opts.min_drift_windows and np.ptp(t_mid) > 0:
-            slope, intercept, _, _ = stats.theilslopes(rel, t_mid)
-        else:
-            slope, intercept = 0.0, float(np.median(rel))
-        return PairEstimate(a, b, float(intercept), float(slope), delay, float(len(both)), len(both), "two-way")
+    if both.empty:
+        return None
+    rel = ((both["fwd"] - both["bwd"]) / 2).to_numpy()
+    delay = float(np.median((both["fwd"] + both["bwd"]) / 2))
+    t_mid = both["t_mid"].to_numpy()
+    if len(both) >= opts.min_drift_windows and np.ptp(t_mid) > 0:
+        slope, intercept, _, _ = stats.theilslopes(rel, t_mid)
+    else:
+        slope, intercept = 0.0, float(np.median(rel))
+    n = len(both)
+    return PairEstimate(a, b, float(intercept), float(slope), delay, float(n), n, "two-way")
+
+
+def one_way_estimate(a: int, b: int, win: pd.DataFrame, opts: ClockOptions,
+                     typical_delay_s: float) -> PairEstimate | None:
+    """Relative clock from one direction only, assuming the typical delay of the two-way pairs."""
     if win["fwd"].notna().any():
         rel = float(win["fwd"].min()) - typical_delay_s
     elif win["bwd"].notna().any():
@@ -102,11 +108,16 @@ def estimate_pair(samples: pd.DataFrame, a: int, b: int, opts: ClockOptions,
 
 
 def estimate_pairs(samples: pd.DataFrame, opts: ClockOptions) -> list[PairEstimate]:
-    pairs = {(min(a, b), max(a, b)) for a, b in zip(samples["a"], samples["b"], strict=True) if a != b}
-    two_way = [e for p in sorted(pairs) if (e := estimate_pair(samples, *p, opts)) and e.method == "two-way"]
+    """Two-way estimates for every pair heard both ways, then one-way ones for the rest."""
+    directed = {(int(a), int(b)): g for (a, b), g in samples.groupby(["a", "b"])}
+    empty = samples.iloc[0:0]
+    pairs = sorted({(min(a, b), max(a, b)) for a, b in directed if a != b})
+    wins = {p: window_minima(directed.get(p, empty), directed.get(p[::-1], empty), opts.window_s)
+            for p in pairs}
+    two_way = [e for p, w in wins.items() if (e := two_way_estimate(*p, w, opts))]
     typical = float(np.median([e.delay_s for e in two_way])) if two_way else 0.0
     done = {(e.a, e.b) for e in two_way}
-    one_way = [e for p in sorted(pairs - done) if (e := estimate_pair(samples, *p, opts, typical))]
+    one_way = [e for p, w in wins.items() if p not in done and (e := one_way_estimate(*p, w, opts, typical))]
     return two_way + one_way
 
 
@@ -159,7 +170,8 @@ def _method(node: int, col: dict[int, int], used: list[PairEstimate]) -> str:
     return "two-way" if any(e.method == "two-way" for e in mine) else "one-way"
 
 
-def estimate_clocks(messages: pd.DataFrame, nodes: list[int], opts: ClockOptions | None = None) -> pd.DataFrame:
+def estimate_clocks(messages: pd.DataFrame, nodes: list[int],
+                    opts: ClockOptions | None = None) -> pd.DataFrame:
     """Estimated clock of every node: columns node, offset_s, drift_ppm, method, pairs."""
     opts = opts or ClockOptions()
     return solve_clocks(estimate_pairs(clock_samples(messages), opts), nodes)

@@ -18,6 +18,7 @@ from swarmbox.core.messages import GROUND_ID, NET_ID
 from swarmbox.core.node import CoreTiming
 from swarmbox.core.swarm import Swarm
 from swarmbox.core.topology import Topology, build
+from swarmbox.faults import install_faults
 from swarmbox.hal.safety import SafetyLimits
 from swarmbox.net.medium import LinkSpec, SimMedium
 from swarmbox.record.schema import node_name
@@ -59,11 +60,27 @@ def timing_of(cfg: DictConfig) -> CoreTiming:
 def clocks_of(cfg: DictConfig, mission: Mission) -> dict[int, ClockSpec]:
     names = {node_name(i): i for i in [GROUND_ID, *mission.drone_ids]}
     out = {}
-    for name, spec in cfg.run.clocks.items():
+    for name, spec in clock_settings(cfg).items():
         if name not in names:
             raise ConfigError(f"run.clocks: unknown node '{name}' (nodes: {', '.join(names)})")
-        out[names[name]] = ClockSpec(spec.offset_s, spec.drift_ppm)
+        if not isinstance(spec, dict) or set(spec) - {"offset_s", "drift_ppm"}:
+            raise ConfigError(f"run.clocks.{name}: expected {{offset_s, drift_ppm}}, got {spec!r}")
+        try:
+            out[names[name]] = ClockSpec(float(spec.get("offset_s", 0.0)), float(spec.get("drift_ppm", 0.0)))
+        except (TypeError, ValueError):
+            raise ConfigError(f"run.clocks.{name}: offset_s and drift_ppm must be numbers, "
+                              f"got {spec!r}") from None
     return out
+
+
+def clock_settings(cfg: DictConfig) -> dict:
+    """``run.clocks`` as plain data ({} when unset)."""
+    clocks = cfg.run.clocks
+    if clocks is None:
+        return {}
+    if not OmegaConf.is_dict(clocks):
+        raise ConfigError(f"run.clocks must map node names to {{offset_s, drift_ppm}}, got {clocks!r}")
+    return OmegaConf.to_container(clocks, resolve=True)
 
 
 def medium_of(cfg: DictConfig, time: TimeSource, seed: int, recorder: Recorder,
@@ -141,8 +158,10 @@ def build_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> Swarm:
     elif cfg.topology.peers != "none":
         raise ConfigError(f"topology.peers must be 'none' or 'all', got '{cfg.topology.peers}'")
     event_logs = {i: recorder.node(i).appender("events") for i in mission.drone_ids}
-    return Swarm(time=time, tick_s=timing.tick_s, ground=ground, agents=agents, medium=medium,
-                 backend=backend, event_logs=event_logs)
+    swarm = Swarm(time=time, tick_s=timing.tick_s, ground=ground, agents=agents, medium=medium,
+                  backend=backend, event_logs=event_logs)
+    install_faults(cfg, swarm, mission, backend, lambda stream: rng_for(seed, stream))
+    return swarm
 
 
 def run_dir_of(cfg: DictConfig, default: str | Path) -> Path:

@@ -13,6 +13,8 @@ from typing import Any, Optional
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
+from swarmbox.faults.schema import FaultConfig  # generated from the fault models' parameters
+
 GROUPS = ("algo", "mission", "topology", "backend", "network", "fault")
 
 
@@ -70,11 +72,6 @@ class NetworkConfig:
 
 
 @dataclass
-class FaultConfig:
-    name: str = "none"
-
-
-@dataclass
 class StageTimeouts:
     ICEBREAK: float = 60.0      # s; a stage that overruns aborts the mission with a reason
     PREPARATION: float = 60.0
@@ -82,12 +79,6 @@ class StageTimeouts:
     LANDING: float = 120.0
     TERMINATION: float = 10.0
     ABORT: float = 120.0
-
-
-@dataclass
-class ClockConfig:
-    offset_s: float = 0.0       # local = true * (1 + drift_ppm * 1e-6) + offset_s
-    drift_ppm: float = 0.0
 
 
 @dataclass
@@ -111,7 +102,9 @@ class RunConfig:
     proximity_m: float = 2.0        # ProxAlert radius
     min_alive: int = 1              # fewer alive drones after ICEBREAK: abort
     state_every_ticks: int = 1      # state-table sampling period
-    clocks: dict[str, ClockConfig] = field(default_factory=dict)  # node name -> clock error
+    # node name -> {offset_s, drift_ppm}: local = true * (1 + drift_ppm * 1e-6) + offset_s, e.g.
+    # run.clocks='{drone_2: {offset_s: 0.5, drift_ppm: 100}}'
+    clocks: Optional[Any] = None
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     speed: float = 1.0              # real-time backends: wall-clock pacing factor (SITL speed-up)
     progress: bool = True           # progress lines on stderr for long runs

@@ -92,7 +92,7 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         "seed": int(cfg.seed), "choices": choices, "overrides": overrides,
         "sim_time_s": 0.0, "wall_time_s": 0.0, "real_time_factor": None, "ticks": 0,
         "tick_s": 1.0 / cfg.run.tick_hz, "n_drones": 0, "nodes": [],
-        "clocks": {k: dict(v) for k, v in OmegaConf.to_container(cfg.run.clocks).items()},
+        "clocks": {},
         "versions": _versions(), "git_sha": _git_sha(),
         "started_at": datetime.now(UTC).isoformat(timespec="seconds"),
     }
@@ -102,6 +102,7 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         m = mission.load(cfg, build.rng_for(int(cfg.seed), "dataset"))
         manifest["n_drones"] = m.swarm_size
         manifest["nodes"] = [node_name(i) for i in [GROUND_ID, *m.drone_ids]]
+        manifest["clocks"] = build.clock_settings(cfg)
         swarm = build.build_swarm(cfg, m, recorder)
         if prepare is not None:
             prepare(swarm)

@@ -129,3 +129,16 @@ def test_hover_holds_altitude(run):
     st = table(d, "drone_3", "state")
     hover = st[st["stage"] == Stage.EXECUTION].tail(40)
     assert np.allclose(hover["true_d"], -4.0, atol=0.3)
+
+
+def test_node_clock_offsets_are_applied_and_recorded(run):
+    manifest, d = run("algo=hover", "mission=hover", "run.clocks={drone_2: {offset_s: 0.5, drift_ppm: 100}}")
+    assert manifest["clocks"] == {"drone_2": {"offset_s": 0.5, "drift_ppm": 100}}
+    g, d2 = table(d, "ground", "stages"), table(d, "drone_2", "stages")
+    # Both enter ICEBREAK at true time 0: the drone's local clock reads the offset.
+    assert d2["t_s"].iloc[0] - g["t_s"].iloc[0] == pytest.approx(0.5)
+
+
+def test_unknown_clock_node_is_refused(run):
+    manifest, _ = run("algo=hover", "mission=hover", "run.clocks={drone_9: {offset_s: 1}}")
+    assert manifest["status"] == "failed" and "unknown node 'drone_9'" in manifest["reason"]

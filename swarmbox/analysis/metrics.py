@@ -1,0 +1,207 @@
+"""Built-in per-run metrics from unified tables (paper Table 6, safety, swarm order, discrepancy).
+
+All times are unified (ground clock, column ``t_u``). Unless stated, a metric covers the EXECUTION
+stage: from the ground's entry into EXECUTION to the ground's next stage entry (LANDING or ABORT); if
+the ground never left EXECUTION, to the last record of the run (``ExecWindow.complete`` is False).
+
+Per drone:
+- path length (horizontal ``distance_h_m`` and 3-D ``distance_3d_m``) = sum of the distances between
+  consecutive state samples inside the window; ground-truth position when the drone's ``true_*``
+  columns are all finite there, else the estimate (``position_source``);
+- completion time = the time of the drone's ``progress/exec_complete`` event that started its final
+  complete streak (the first one, unless an ``exec_incomplete`` followed it); busy time =
+  completion - EXECUTION start, clipped to [0, duration]; a drone that never completed is busy for the
+  whole duration; utilization = busy / duration; idle = duration - busy;
+- discrepancy = GNSS - estimated position per state sample (N, E, D; horizontal = hypot(N, E)).
+
+Across drones: mean and population standard deviation (ddof 0) of the per-drone values.
+Safety and swarm metrics align drones on the run's global ``tick``:
+- separation at a tick = smallest 3-D distance over drone pairs (truth if every drone has it, else the
+  estimate); ``min_separation_m`` its minimum over the window; ``time_below_separation_s`` = ticks
+  with separation < threshold x tick length;
+- order at a tick = |sum_i v_i| / sum_i |v_i| over the drones' estimated 3-D velocities (NaN when
+  the swarm is at rest); ``order_mean`` its mean over the window;
+- collision and safety events are counted over the whole run: a collision matters whenever it happens.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from swarmbox.analysis.load import GROUND
+from swarmbox.analysis.unify import T
+
+EXECUTION = 3
+
+
+@dataclass(frozen=True, slots=True)
+class ExecWindow:
+    start: float
+    end: float
+    complete: bool   # the ground left EXECUTION (else ``end`` is the last record of the run)
+
+    @property
+    def duration(self) -> float:
+        return self.end - self.start
+
+
+def exec_window(stages: pd.DataFrame, t_last: float) -> ExecWindow | None:
+    """The ground's EXECUTION interval, or None when the ground never entered EXECUTION."""
+    ground = stages[stages["node"] == GROUND].sort_values(T)
+    starts = ground.loc[ground["stage"] == EXECUTION, T]
+    if starts.empty:
+        return None
+    start = float(starts.iloc[0])
+    after = ground[(ground[T] > start) & (ground["stage"] != EXECUTION)]
+    if after.empty:
+        return ExecWindow(start, max(start, t_last), False)
+    return ExecWindow(start, float(after[T].iloc[0]), True)
+
+
+def within(frame: pd.DataFrame, window: ExecWindow) -> pd.DataFrame:
+    return frame[(frame[T] >= window.start) & (frame[T] <= window.end)]
+
+
+def _positions(rows: pd.DataFrame) -> tuple[np.ndarray, str]:
+    true = rows[["true_n", "true_e", "true_d"]].to_numpy(dtype="float64")
+    if len(true) and np.isfinite(true).all():
+        return true, "truth"
+    return rows[["pos_n", "pos_e", "pos_d"]].to_numpy(dtype="float64"), "estimate"
+
+
+def path_length(rows: pd.DataFrame) -> tuple[float, float, str]:
+    """Horizontal and 3-D path length over the (time-sorted) samples, and the position source."""
+    pos, source = _positions(rows.sort_values(T))
+    if len(pos) < 2:
+        return 0.0, 0.0, source
+    step = np.diff(pos, axis=0)
+    step = step[np.isfinite(step).all(axis=1)]
+    return float(np.hypot(step[:, 0], step[:, 1]).sum()), float(np.linalg.norm(step, axis=1).sum()), source
+
+
+def completion_time(events: pd.DataFrame, drone: int) -> float:
+    """Start of the drone's final complete streak (NaN if it never completed or flipped back last)."""
+    mine = events[(events["node"] == drone) & (events["kind"] == "progress")
+                  & events["name"].isin(["exec_complete", "exec_incomplete"])].sort_values(T)
+    if mine.empty or mine["name"].iloc[-1] != "exec_complete":
+        return np.nan
+    last_incomplete = mine.loc[mine["name"] == "exec_incomplete", T]
+    done = mine[mine["name"] == "exec_complete"]
+    if len(last_incomplete):
+        done = done[done[T] > last_incomplete.iloc[-1]]
+    return float(done[T].iloc[0])
+
+
+def drone_workload(state: pd.DataFrame, events: pd.DataFrame, drones: list[int],
+                   window: ExecWindow) -> pd.DataFrame:
+    """Per drone: path lengths, completion, busy, utilization, idle (columns documented above)."""
+    rows = []
+    for drone in drones:
+        dist_h, dist_3d, source = path_length(within(state[state["node"] == drone], window))
+        t_done = completion_time(events, drone)
+        busy = window.duration
+        if not np.isnan(t_done):
+            busy = float(np.clip(t_done - window.start, 0, window.duration))
+        rows.append({
+            "drone": drone, "distance_h_m": dist_h, "distance_3d_m": dist_3d, "position_source": source,
+            "t_complete_u": t_done, "completed": not np.isnan(t_done), "busy_s": busy,
+            "utilization": busy / window.duration if window.duration > 0 else np.nan,
+            "idle_s": window.duration - busy,
+        })
+    return pd.DataFrame(rows)
+
+
+def spread(values: pd.Series, name: str) -> dict[str, float]:
+    """Mean and population std of per-drone values."""
+    arr = values.to_numpy(dtype="float64")
+    if arr.size == 0:
+        return {f"{name}_mean": np.nan, f"{name}_std": np.nan}
+    return {f"{name}_mean": float(np.nanmean(arr)), f"{name}_std": float(np.nanstd(arr, ddof=0))}
+
+
+def workload_summary(per_drone: pd.DataFrame, window: ExecWindow) -> dict[str, float]:
+    out: dict[str, float] = {"mission_duration_s": window.duration}
+    for col in ("distance_h_m", "distance_3d_m", "busy_s", "utilization"):
+        out |= spread(per_drone[col], col)
+    out["distance_h_m_total"] = float(per_drone["distance_h_m"].sum())
+    out["idle_s_mean"] = float(per_drone["idle_s"].mean()) if len(per_drone) else np.nan
+    out["completed_fraction"] = float(per_drone["completed"].mean()) if len(per_drone) else np.nan
+    return out
+
+
+def discrepancy(state: pd.DataFrame) -> pd.DataFrame:
+    """GNSS - estimate per state sample: columns node, tick, t_u, disc_n_m, disc_e_m, disc_d_m, disc_h_m."""
+    out = state[["node", "tick", T]].copy()
+    for axis in "ned":
+        out[f"disc_{axis}_m"] = state[f"gnss_{axis}"] - state[f"pos_{axis}"]
+    out["disc_h_m"] = np.hypot(out["disc_n_m"], out["disc_e_m"])
+    return out
+
+
+def _by_tick(state: pd.DataFrame, cols: list[str], drones: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """Array (ticks, drones, len(cols)) with NaN where a drone has no sample at a tick."""
+    ticks = np.sort(state["tick"].unique())
+    out = np.full((len(ticks), len(drones), len(cols)), np.nan)
+    t_idx = np.searchsorted(ticks, state["tick"].to_numpy())
+    d_map = {d: i for i, d in enumerate(drones)}
+    d_idx = state["node"].map(d_map).to_numpy()
+    keep = ~pd.isna(d_idx)
+    out[t_idx[keep], d_idx[keep].astype(int)] = state.loc[keep, cols].to_numpy(dtype="float64")
+    return ticks, out
+
+
+def separation_by_tick(state: pd.DataFrame, drones: list[int]) -> pd.Series:
+    """Smallest pairwise 3-D distance between drones at every tick (NaN with fewer than 2 drones)."""
+    state = state.drop_duplicates(["node", "tick"], keep="last")
+    truth = state[["true_n", "true_e", "true_d"]].to_numpy(dtype="float64")
+    has_truth = len(truth) and np.isfinite(truth).all()
+    cols = ["true_n", "true_e", "true_d"] if has_truth else ["pos_n", "pos_e", "pos_d"]
+    ticks, pos = _by_tick(state, cols, drones)
+    if len(drones) < 2 or len(ticks) == 0:
+        return pd.Series(np.nan, index=ticks, dtype="float64")
+    diff = pos[:, :, None, :] - pos[:, None, :, :]
+    dist = np.linalg.norm(diff, axis=-1)
+    iu = np.triu_indices(len(drones), k=1)
+    pairs = dist[:, iu[0], iu[1]]
+    with np.errstate(all="ignore"):
+        best = np.where(np.isfinite(pairs).any(axis=1), np.nanmin(np.where(np.isfinite(pairs), pairs, np.inf),
+                                                                    axis=1), np.nan)
+    return pd.Series(best, index=ticks, dtype="float64")
+
+
+def order_by_tick(state: pd.DataFrame, drones: list[int]) -> pd.Series:
+    """Velocity alignment |sum v| / sum |v| at every tick (NaN when every drone is at rest)."""
+    state = state.drop_duplicates(["node", "tick"], keep="last")
+    ticks, vel = _by_tick(state, ["vel_n", "vel_e", "vel_d"], drones)
+    vel = np.nan_to_num(vel)
+    total = np.linalg.norm(vel.sum(axis=1), axis=1)
+    norms = np.linalg.norm(vel, axis=2).sum(axis=1)
+    with np.errstate(all="ignore"):
+        order = np.where(norms > 1e-9, total / norms, np.nan)
+    return pd.Series(order, index=ticks, dtype="float64")
+
+
+def swarm_timeline(state: pd.DataFrame, drones: list[int]) -> pd.DataFrame:
+    """Per tick: unified time (earliest drone sample), minimum separation and order."""
+    times = state.groupby("tick")[T].min()
+    sep = separation_by_tick(state, drones)
+    order = order_by_tick(state, drones)
+    return pd.DataFrame({"tick": times.index, T: times.to_numpy(),
+                         "separation_m": sep.reindex(times.index).to_numpy(),
+                         "order": order.reindex(times.index).to_numpy()})
+
+
+def swarm_summary(swarm: pd.DataFrame, events: pd.DataFrame, tick_s: float,
+                  threshold_m: float) -> dict[str, float]:
+    """Safety and order scalars over the ticks of ``swarm``; event counts over all of ``events``."""
+    sep, order = swarm["separation_m"], swarm["order"]
+    return {
+        "min_separation_m": float(sep.min()) if sep.notna().any() else np.nan,
+        "time_below_separation_s": float((sep < threshold_m).sum() * tick_s),
+        "collision_events": float((events["kind"] == "collision").sum()),
+        "safety_events": float((events["kind"] == "safety").sum()),
+        "order_mean": float(order.mean()) if order.notna().any() else np.nan,
+    }

@@ -1,0 +1,159 @@
+"""One run, end to end: load -> unify -> metrics -> timeline -> anomalies -> diagnosis."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from swarmbox.analysis import anomaly, metrics, mission, network
+from swarmbox.analysis.catalog import Direction
+from swarmbox.analysis.load import RunData, load_run
+from swarmbox.analysis.timeline import drone_timeline
+from swarmbox.analysis.unify import ClockOptions, T, unify
+
+
+@dataclass(frozen=True)
+class AnalysisOptions:
+    """Knobs of a run analysis (defaults are the documented ones)."""
+
+    window_s: float = 0.5              # timeline / anomaly window
+    graph_window_s: float = 1.0        # communication-graph window
+    clock: ClockOptions = field(default_factory=ClockOptions)
+    separation_m: float = 2.0          # threshold of time_below_separation_s
+    iqr_k: float = 1.5
+    min_deviation: dict[str, float] = field(default_factory=dict)   # overrides per monitored metric
+    fault_onset_u: float | None = None  # overrides the fault event (unified time, s)
+    fault_target: int | None = None
+
+    def tests(self) -> dict[str, anomaly.OutlierTest]:
+        tests = anomaly.default_tests(self.iqr_k)
+        for name, dev in self.min_deviation.items():
+            tests[name] = anomaly.OutlierTest(self.iqr_k, dev)
+        return tests
+
+
+@dataclass
+class RunAnalysis:
+    """Every table and scalar computed for one run."""
+
+    run: RunData
+    clocks: pd.DataFrame
+    window: metrics.ExecWindow | None
+    flow: pd.DataFrame
+    links: pd.DataFrame
+    agents: pd.DataFrame
+    drones: pd.DataFrame
+    timeline: pd.DataFrame
+    swarm: pd.DataFrame
+    connectivity: pd.DataFrame
+    flags: pd.DataFrame
+    diagnosis: pd.DataFrame
+    markers: pd.DataFrame
+    onset: anomaly.FaultOnset | None
+    scalars: dict[str, float]
+    directions: dict[str, Direction]
+
+    @property
+    def problems(self) -> list[str]:
+        return self.run.problems
+
+
+def _last_time(run: RunData) -> float:
+    ends = [float(f[T].max()) for f in run.tables.values() if len(f) and f[T].notna().any()]
+    return max(ends) if ends else np.nan
+
+
+def _first_time(run: RunData) -> float:
+    starts = [float(f[T].min()) for f in run.tables.values() if len(f) and f[T].notna().any()]
+    return min(starts) if starts else np.nan
+
+
+def _tick_s(run: RunData) -> float:
+    if run.manifest.get("tick_s"):
+        return float(run.manifest["tick_s"])
+    ticks = run.tables["state"].drop_duplicates("tick").sort_values("tick")
+    steps = np.diff(ticks[T]) / np.maximum(np.diff(ticks["tick"]), 1)
+    return float(np.median(steps)) if len(steps) else np.nan
+
+
+def _manifest_scalars(manifest: dict) -> dict[str, float]:
+    out = {}
+    for key in ("sim_time_s", "wall_time_s", "real_time_factor", "n_drones"):
+        value = manifest.get(key)
+        out[key] = float(value) if isinstance(value, int | float) else np.nan
+    return out
+
+
+def _drone_table(run: RunData, window: metrics.ExecWindow | None, span: metrics.ExecWindow,
+                 agents: pd.DataFrame, disc: pd.DataFrame) -> pd.DataFrame:
+    drones = run.drones
+    table = pd.DataFrame({"drone": drones})
+    if window is not None:
+        table = metrics.drone_workload(run.tables["state"], run.tables["events"], drones, window)
+    d = metrics.within(disc, span).groupby("node")["disc_h_m"].agg(disc_h_m_mean="mean", disc_h_m_max="max")
+    table = table.merge(d, left_on="drone", right_index=True, how="left")
+    net = agents.rename(columns={"agent": "drone"})
+    return table.merge(net, on="drone", how="left")
+
+
+def _scalars(run: RunData, window: metrics.ExecWindow | None, span: metrics.ExecWindow,
+             per_drone: pd.DataFrame, exec_flow: pd.DataFrame, swarm: pd.DataFrame,
+             connectivity: pd.DataFrame, opts: AnalysisOptions) -> dict[str, float]:
+    out = _manifest_scalars(run.manifest)
+    if window is not None:
+        out |= metrics.workload_summary(per_drone, window)
+    out |= network.overall_stats(exec_flow)
+    tx = per_drone["tx_bytes_per_s"] if "tx_bytes_per_s" in per_drone else pd.Series(dtype="float64")
+    out["tx_bytes_per_s_mean"] = float(tx.mean()) if len(tx) else np.nan
+    out["discrepancy_h_m_mean"] = float(per_drone["disc_h_m_mean"].mean())
+    out["discrepancy_h_m_max"] = float(per_drone["disc_h_m_max"].max())
+    out |= metrics.swarm_summary(metrics.within(swarm, span), run.tables["events"], _tick_s(run),
+                                 opts.separation_m)
+    conn = metrics.within(connectivity, span)["connectivity"]
+    out["connectivity_mean"] = float(conn.mean()) if len(conn) else np.nan
+    out["connectivity_min"] = float(conn.min()) if len(conn) else np.nan
+    return out
+
+
+def analyze_run(source: str | Path | RunData, opts: AnalysisOptions | None = None) -> RunAnalysis:
+    """Analyze one run directory (or already loaded data, which gets unified in place)."""
+    opts = opts or AnalysisOptions()
+    run = source if isinstance(source, RunData) else load_run(source)
+    clocks = unify(run, opts.clock)
+    window = metrics.exec_window(run.tables["stages"], _last_time(run))
+    if window is None:
+        run.problems.append("the ground never entered EXECUTION: workload metrics are NaN")
+    span = window or metrics.ExecWindow(_first_time(run), _last_time(run), False)
+    flow = network.message_flow(run.tables["messages"], _tick_s(run))
+    exec_flow = network.between(flow, span.start, span.end)
+    links = network.link_stats(exec_flow, span.duration)
+    agents = network.agent_stats(exec_flow, span.duration)
+    disc = metrics.discrepancy(run.tables["state"])
+    per_drone = _drone_table(run, window, span, agents, disc)
+    timeline = drone_timeline(flow, disc, run.drones, opts.window_s)
+    swarm = metrics.swarm_timeline(run.tables["state"], run.drones)
+    connectivity = network.connectivity_timeline(flow, run.nodes, opts.graph_window_s)
+    flags = anomaly.detect(timeline, opts.tests())
+    onset = _onset(run, opts)
+    diagnosis = anomaly.diagnose(flags, onset) if onset else pd.DataFrame()
+    scalars = _scalars(run, window, span, per_drone, exec_flow, swarm, connectivity, opts)
+    scalars |= anomaly.diagnosis_scalars(diagnosis)
+    specs = mission.parse_specs(run.config, run.problems)
+    mission_values, directions = mission.mission_metrics(run.tables["events"], specs, span.start)
+    scalars |= mission_values
+    markers = mission.marker_table(run.tables["events"], specs, span.start)
+    return RunAnalysis(run, clocks, window, flow, links, agents, per_drone, timeline, swarm, connectivity,
+                       flags, diagnosis, markers, onset, scalars, directions)
+
+
+def _onset(run: RunData, opts: AnalysisOptions) -> anomaly.FaultOnset | None:
+    found = anomaly.fault_onset(run.tables["events"])
+    if opts.fault_onset_u is None:
+        if found is not None and opts.fault_target is not None:
+            return anomaly.FaultOnset(found.t_u, found.name, opts.fault_target, found.extra)
+        return found
+    target = opts.fault_target if opts.fault_target is not None else (found.target if found else None)
+    return anomaly.FaultOnset(opts.fault_onset_u, found.name if found else "given", target)

@@ -1,0 +1,258 @@
+"""Benchmark tables over a sweep (multirun) directory.
+
+- ``runs``: one row per analyzed run: ``run`` (path relative to the sweep), ``status``, ``seed``, the
+  config choices from ``run.json`` (``choices``; never parsed from directory names) and every scalar
+  metric. Failed runs, directories whose ``run.json`` is unreadable and runs missing a table the
+  metrics need are reported in ``problems`` and skipped.
+- ``summary`` (long): per group (default: ``algo``) and metric, over the runs whose status is in
+  ``statuses`` (default ``ok``): n, mean, median, sample std, and a percentile bootstrap CI of the
+  mean (``n_boot`` resamples, level ``ci``). Every (group, metric) cell draws from its own
+  ``numpy.random.Generator`` seeded with ``SeedSequence([seed, crc32("group|metric")])``, so the
+  numbers do not depend on the order or number of other cells. NaN values are left out.
+- ``paired``: for two groups a and b, runs paired on ``seed`` and every other choice (e.g. the
+  mission); per metric: n pairs, mean of b - a with a bootstrap CI, Wilcoxon signed-rank p-value
+  (1.0 when every difference is 0) and which side is better given the metric's direction (only when
+  the CI excludes 0).
+- ``ranks``: per metric with a direction, groups ranked by mean (1 = best; means equal to 5
+  significant digits tie and share the lower rank), plus the mean rank.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import warnings
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from swarmbox.analysis.catalog import Direction, direction_of, unit_of
+from swarmbox.analysis.load import RunLoadError, find_runs, load_run
+from swarmbox.analysis.report import AnalysisOptions, analyze_run
+
+log = logging.getLogger(__name__)
+
+ID_COLUMNS = ("run", "status", "seed")
+
+
+@dataclass(frozen=True)
+class SweepOptions:
+    group_by: tuple[str, ...] = ("algo",)
+    statuses: tuple[str, ...] = ("ok",)
+    n_boot: int = 2000
+    ci: float = 0.95
+    seed: int = 0
+    pairs: tuple[tuple[str, str], ...] | None = None   # None: every pair of groups
+    run: AnalysisOptions = field(default_factory=AnalysisOptions)
+
+
+@dataclass
+class SweepResult:
+    runs: pd.DataFrame
+    problems: pd.DataFrame
+    summary: pd.DataFrame
+    paired: pd.DataFrame
+    ranks: pd.DataFrame
+    directions: dict[str, Direction]
+    choice_columns: list[str]
+    group_by: tuple[str, ...]
+
+    def metric_columns(self) -> list[str]:
+        return metric_columns(self.runs, self.choice_columns)
+
+
+def collect_runs(root: Path, opts: AnalysisOptions) -> tuple[pd.DataFrame, pd.DataFrame, dict, list[str]]:
+    """Analyze every run below ``root``: (runs table, problems table, declared directions, choice columns)."""
+    rows, problems, directions, choices = [], [], {}, []
+    for run_dir in find_runs(root):
+        rel = str(run_dir.relative_to(root)) if run_dir != root else "."
+        try:
+            run = load_run(run_dir)
+        except RunLoadError as exc:
+            problems.append({"run": rel, "severity": "skipped", "problem": str(exc)})
+            continue
+        notes = [{"run": rel, "severity": "warning", "problem": p} for p in run.problems]
+        skip = _skip_reason(run)
+        if skip:
+            problems += [{"run": rel, "severity": "skipped", "problem": skip}, *notes]
+            continue
+        try:
+            analysis = analyze_run(run, opts)
+        except Exception as exc:  # noqa: BLE001 - one bad run must not stop the sweep
+            log.exception("analysis of %s failed", run_dir)
+            problems.append({"run": rel, "severity": "skipped", "problem": f"analysis failed: {exc!r}"})
+            continue
+        problems += [{"run": rel, "severity": "warning", "problem": p} for p in analysis.problems]
+        run_choices = {str(k): str(v) for k, v in (run.manifest.get("choices") or {}).items()}
+        choices += [c for c in run_choices if c not in choices]
+        directions |= analysis.directions
+        rows.append({"run": rel, "status": run.status, "seed": run.manifest.get("seed"),
+                     **run_choices, **analysis.scalars})
+    runs = pd.DataFrame(rows)
+    return runs, pd.DataFrame(problems, columns=["run", "severity", "problem"]), directions, choices
+
+
+def _skip_reason(run) -> str:
+    if run.status == "failed":
+        return f"run failed: {run.manifest.get('reason') or 'no reason given'}"
+    if run.incomplete:
+        return "incomplete logs: " + "; ".join(run.problems)
+    return ""
+
+
+def metric_columns(runs: pd.DataFrame, choice_columns: list[str]) -> list[str]:
+    skip = set(ID_COLUMNS) | set(choice_columns)
+    return [c for c in runs.columns if c not in skip and pd.api.types.is_numeric_dtype(runs[c])]
+
+
+def _rng(seed: int, *key: str) -> np.random.Generator:
+    return np.random.default_rng(np.random.SeedSequence([seed, zlib.crc32("|".join(key).encode())]))
+
+
+def bootstrap_ci(values: np.ndarray, rng: np.random.Generator, n_boot: int,
+                 level: float) -> tuple[float, float]:
+    """Percentile bootstrap CI of the mean (NaN with fewer than 2 values)."""
+    values = np.asarray(values, dtype="float64")
+    if values.size < 2:
+        return np.nan, np.nan
+    means = values[rng.integers(0, values.size, size=(n_boot, values.size))].mean(axis=1)
+    tail = (1 - level) / 2 * 100
+    lo, hi = np.percentile(means, [tail, 100 - tail])
+    return float(lo), float(hi)
+
+
+def _label(key: object) -> str:
+    return "/".join(str(k) for k in key) if isinstance(key, tuple) else str(key)
+
+
+def _finite(series: pd.Series) -> np.ndarray:
+    arr = series.to_numpy(dtype="float64")
+    return arr[np.isfinite(arr)]
+
+
+def summarize(runs: pd.DataFrame, metrics: list[str], opts: SweepOptions,
+              directions: dict[str, Direction]) -> pd.DataFrame:
+    """Long summary table: group columns, metric, n, mean, median, std, ci_low, ci_high, direction, unit."""
+    chosen = runs[runs["status"].isin(opts.statuses)] if len(runs) else runs
+    rows = []
+    if chosen.empty:
+        return pd.DataFrame(columns=[*opts.group_by, "metric", "n", "mean", "ci_low", "ci_high"])
+    for key, group in chosen.groupby(list(opts.group_by), sort=True, dropna=False):
+        keys = dict(zip(opts.group_by, key if isinstance(key, tuple) else (key,), strict=True))
+        for metric in metrics:
+            values = _finite(group[metric])
+            lo, hi = bootstrap_ci(values, _rng(opts.seed, _label(key), metric), opts.n_boot, opts.ci)
+            rows.append({**keys, "metric": metric, "n": int(values.size),
+                         "mean": float(values.mean()) if values.size else np.nan,
+                         "median": float(np.median(values)) if values.size else np.nan,
+                         "std": float(values.std(ddof=1)) if values.size > 1 else np.nan,
+                         "ci_low": lo, "ci_high": hi, "direction": direction_of(metric, directions) or "",
+                         "unit": unit_of(metric)})
+    return pd.DataFrame(rows)
+
+
+def _pairs_frame(runs: pd.DataFrame, opts: SweepOptions, choice_columns: list[str], a: str, b: str,
+                 metric: str) -> pd.DataFrame:
+    label = runs[list(opts.group_by)].astype("str").agg("/".join, axis=1)
+    keys = ["seed"] + [c for c in choice_columns if c not in opts.group_by]
+    left = runs[label == a][keys + [metric]].rename(columns={metric: "a"})
+    right = runs[label == b][keys + [metric]].rename(columns={metric: "b"})
+    both = left.merge(right, on=keys, how="inner").dropna(subset=["a", "b"])
+    return both[np.isfinite(both["a"]) & np.isfinite(both["b"])]
+
+
+def _wilcoxon(diff: np.ndarray) -> float:
+    if diff.size == 0:
+        return np.nan
+    if np.all(diff == 0):
+        return 1.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return float(stats.wilcoxon(diff).pvalue)
+
+
+def paired(runs: pd.DataFrame, metrics: list[str], opts: SweepOptions, choice_columns: list[str],
+           directions: dict[str, Direction]) -> pd.DataFrame:
+    """Paired-by-seed comparison of every requested pair of groups (b - a)."""
+    chosen = runs[runs["status"].isin(opts.statuses)] if len(runs) else runs
+    if chosen.empty:
+        return pd.DataFrame(columns=["a", "b", "metric", "n_pairs", "diff_mean", "ci_low", "ci_high",
+                                     "p_wilcoxon"])
+    labels = sorted(chosen[list(opts.group_by)].astype("str").agg("/".join, axis=1).unique())
+    pairs = opts.pairs if opts.pairs is not None else tuple(itertools.combinations(labels, 2))
+    rows = []
+    for a, b in pairs:
+        for metric in metrics:
+            both = _pairs_frame(chosen, opts, choice_columns, a, b, metric)
+            diff = (both["b"] - both["a"]).to_numpy(dtype="float64")
+            lo, hi = bootstrap_ci(diff, _rng(opts.seed, a, b, metric), opts.n_boot, opts.ci)
+            direction = direction_of(metric, directions)
+            rows.append({"a": a, "b": b, "metric": metric, "n_pairs": int(diff.size),
+                         "mean_a": float(both["a"].mean()) if diff.size else np.nan,
+                         "mean_b": float(both["b"].mean()) if diff.size else np.nan,
+                         "diff_mean": float(diff.mean()) if diff.size else np.nan,
+                         "ci_low": lo, "ci_high": hi, "p_wilcoxon": _wilcoxon(diff),
+                         "direction": direction or "", "better": _better(a, b, lo, hi, direction)})
+    return pd.DataFrame(rows)
+
+
+def _better(a: str, b: str, lo: float, hi: float, direction: Direction) -> str:
+    if direction is None or np.isnan(lo) or lo <= 0 <= hi:
+        return ""
+    b_higher = lo > 0
+    return b if b_higher == (direction == "higher") else a
+
+
+def _significant(values: pd.Series, digits: int = 5) -> pd.Series:
+    return values.map(lambda v: float(f"{v:.{digits}g}") if np.isfinite(v) else v)
+
+
+def ranks(summary: pd.DataFrame, group_by: tuple[str, ...]) -> pd.DataFrame:
+    """Groups ranked per metric by mean (1 = best); metrics without a direction are left out.
+
+    Means equal to 5 significant digits tie (they share the lower rank).
+    """
+    ranked = summary[summary["direction"].isin(["lower", "higher"])].copy()
+    if ranked.empty:
+        return pd.DataFrame(columns=[*group_by, "mean_rank"])
+    ranked["group"] = ranked[list(group_by)].astype("str").agg("/".join, axis=1)
+    key = _significant(ranked["mean"].astype("float64"))
+    ranked["key"] = np.where(ranked["direction"] == "lower", key, -key)
+    ranked["rank"] = ranked.groupby("metric")["key"].rank(method="min")
+    wide = ranked.pivot(index="group", columns="metric", values="rank")
+    wide = wide[list(dict.fromkeys(ranked["metric"]))]
+    wide["mean_rank"] = wide.mean(axis=1)
+    return wide.sort_values("mean_rank", kind="stable").reset_index()
+
+
+def analyze_sweep(root: str | Path, opts: SweepOptions | None = None) -> SweepResult:
+    """Analyze every run below ``root`` and build the benchmark tables."""
+    opts = opts or SweepOptions()
+    runs, problems, directions, choice_columns = collect_runs(Path(root), opts.run)
+    missing = [g for g in opts.group_by if g not in runs.columns]
+    if runs.empty or missing:
+        if missing and not runs.empty:
+            problems.loc[len(problems)] = {"run": ".", "severity": "error",
+                                           "problem": f"group-by column(s) {missing} not among the choices"}
+        empty = pd.DataFrame()
+        return SweepResult(runs, problems, empty, empty, empty, directions, choice_columns, opts.group_by)
+    metrics = metric_columns(runs, choice_columns)
+    summary = summarize(runs, metrics, opts, directions)
+    pairs = paired(runs, metrics, opts, choice_columns, directions)
+    return SweepResult(runs, problems, summary, pairs, ranks(summary, opts.group_by), directions,
+                       choice_columns, opts.group_by)
+
+
+def summary_wide(summary: pd.DataFrame, group_by: tuple[str, ...]) -> pd.DataFrame:
+    """Metrics as rows, groups as columns, cells ``mean [ci_low, ci_high]`` (for printing)."""
+    if summary.empty:
+        return summary
+    cell = summary.apply(lambda r: f"{r['mean']:.4g} [{r['ci_low']:.4g}, {r['ci_high']:.4g}]", axis=1)
+    frame = summary.assign(group=summary[list(group_by)].astype("str").agg("/".join, axis=1), cell=cell)
+    wide = frame.pivot(index="metric", columns="group", values="cell")
+    order = list(dict.fromkeys(summary["metric"]))
+    return wide.loc[order].reset_index()

@@ -1,0 +1,64 @@
+"""Per-drone metrics per time window: the series the anomaly detector and the timeline figures read.
+
+Windows tile the unified clock: window k is [k*w, (k+1)*w) and is stamped with its end, (k+1)*w, the
+first moment its value is known. Monitored metrics, per drone and window:
+
+- ``latency_ms``: mean latency of the delivered messages the drone sent or that were sent to it,
+  binned by send time;
+- ``loss_ratio``: lost / counted among those messages (see :mod:`swarmbox.analysis.network`);
+- ``disc_n_m``, ``disc_e_m``, ``disc_d_m``: mean GNSS - estimate over the drone's state samples.
+
+The result is tidy: columns ``t_u`` (window end), ``drone``, ``metric``, ``value``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from swarmbox.analysis.network import touching
+from swarmbox.analysis.unify import T
+
+MONITORED = ("latency_ms", "loss_ratio", "disc_n_m", "disc_e_m", "disc_d_m")
+COLUMNS = [T, "drone", "metric", "value"]
+
+
+def _stamp(t: pd.Series, window_s: float) -> np.ndarray:
+    return (np.floor(t.to_numpy(dtype="float64") / window_s) + 1) * window_s
+
+
+def network_timeline(flow: pd.DataFrame, drones: list[int], window_s: float) -> pd.DataFrame:
+    both = touching(flow)
+    both = both[both["agent"].isin(drones)]
+    if both.empty:
+        return pd.DataFrame(columns=COLUMNS)
+    both = both.assign(**{T: _stamp(both["t_send"], window_s)})
+    got = both[both["delivered"]]
+    lat = got.groupby([T, "agent"])["latency_ms"].mean().rename("latency_ms")
+    counted = both[both["counted"]]
+    loss = counted.groupby([T, "agent"])["lost"].mean().rename("loss_ratio")
+    wide = pd.concat([lat, loss], axis=1).reset_index().rename(columns={"agent": "drone"})
+    return wide.melt(id_vars=[T, "drone"], var_name="metric", value_name="value").dropna(subset=["value"])
+
+
+def discrepancy_timeline(disc: pd.DataFrame, drones: list[int], window_s: float) -> pd.DataFrame:
+    disc = disc[disc["node"].isin(drones)]
+    if disc.empty:
+        return pd.DataFrame(columns=COLUMNS)
+    disc = disc.assign(**{T: _stamp(disc[T], window_s)})
+    cols = ["disc_n_m", "disc_e_m", "disc_d_m"]
+    wide = disc.groupby([T, "node"])[cols].mean().reset_index().rename(columns={"node": "drone"})
+    return wide.melt(id_vars=[T, "drone"], var_name="metric", value_name="value").dropna(subset=["value"])
+
+
+def drone_timeline(flow: pd.DataFrame, disc: pd.DataFrame, drones: list[int],
+                   window_s: float) -> pd.DataFrame:
+    """All monitored metrics, per drone and window (tidy)."""
+    parts = [network_timeline(flow, drones, window_s), discrepancy_timeline(disc, drones, window_s)]
+    parts = [p for p in parts if len(p)]
+    if not parts:
+        return pd.DataFrame(columns=COLUMNS)
+    out = pd.concat(parts, ignore_index=True)
+    out["drone"] = out["drone"].astype("int64")
+    out["value"] = out["value"].astype("float64")
+    return out.sort_values(["metric", T, "drone"]).reset_index(drop=True)

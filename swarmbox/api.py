@@ -112,6 +112,7 @@ class Telemetry(NamedTuple):
     battery_frac: float
     ready_to_arm: bool
     true_pos_ned_m: Vec3 | None
+    link_ok: bool = True
 
 
 class MissionInfo(NamedTuple):

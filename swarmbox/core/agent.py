@@ -47,6 +47,9 @@ class AgentNode(Node):
     def tick(self) -> None:
         self.stage_tick += 1
         tel = self.telemetry = self.vehicle.telemetry()
+        if not tel.link_ok and self.stage not in TERMINAL:
+            self.event("failsafe", "vehicle_link_lost", self.node_id, action="return_to_launch")
+            self.enter(Stage.ABORT, "link to the autopilot lost", failsafe=True)
         self._drain_inbox()
         if self.stage not in TERMINAL:
             self._watch_superior()

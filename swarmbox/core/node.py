@@ -25,6 +25,7 @@ from swarmbox.core.stages import Stage, check_transition
 from swarmbox.record.schema import NO_SUBJECT
 
 Row = tuple
+_ABORT = int(Stage.ABORT)
 
 
 class Transport(Protocol):
@@ -156,10 +157,13 @@ class Node:
         return self._alive_view
 
     def inferiors_complete(self) -> bool:
-        """Every alive direct inferior reports complete *for this node's current stage*."""
+        """Every alive direct inferior reports complete *for this node's current stage*.
+
+        An inferior that aborted on its own (failsafe) no longer holds the others back.
+        """
         stage = int(self.stage)
         return all(inf.report.complete and inf.report.stage == stage
-                   for inf in self.inferiors.values() if inf.alive)
+                   for inf in self.inferiors.values() if inf.alive and inf.report.stage != _ABORT)
 
     def head_count(self) -> tuple[int, int]:
         """(total, alive) drones reachable through alive direct inferiors."""

@@ -10,9 +10,10 @@ on failure the run still closes (and renames) everything it has, so partial logs
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
@@ -42,9 +43,9 @@ class _TableLog:
         if self.writer is None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self.writer = pq.ParquetWriter(_partial(self.path), self.schema, compression="zstd")
-        cols = list(zip(*self.rows, strict=True)) if self.rows else [[] for _ in self.schema]
-        batch = pa.record_batch([pa.array(c, type=f.type) for c, f in zip(cols, self.schema, strict=True)],
-                                schema=self.schema)
+        cols = list(zip(*self.rows, strict=True)) if self.rows else [() for _ in self.schema]
+        batch = pa.RecordBatch.from_arrays(
+            [_column(c, f.type) for c, f in zip(cols, self.schema, strict=True)], schema=self.schema)
         self.writer.write_batch(batch)
         self.rows.clear()
 
@@ -54,6 +55,27 @@ class _TableLog:
             self.writer.close()
             os.replace(_partial(self.path), self.path)
             self.writer = None
+
+
+_NUMPY = {pa.float64(): np.float64, pa.int64(): np.int64, pa.int32(): np.int32, pa.int16(): np.int16,
+          pa.int8(): np.int8}
+
+
+def _column(values: Sequence, typ: pa.DataType) -> pa.Array:
+    """One Arrow column built from raw buffers.
+
+    (``pa.array`` on Python objects would import pandas, which an agent process must not load.)
+    """
+    n = len(values)
+    if typ == pa.string():
+        encoded = [v.encode() for v in values]
+        offsets = np.zeros(n + 1, dtype=np.int32)
+        np.cumsum([len(b) for b in encoded], out=offsets[1:])
+        return pa.Array.from_buffers(typ, n, [None, pa.py_buffer(offsets), pa.py_buffer(b"".join(encoded))])
+    if typ == pa.bool_():
+        bits = np.packbits(np.asarray(values, dtype=bool), bitorder="little")
+        return pa.Array.from_buffers(typ, n, [None, pa.py_buffer(bits)])
+    return pa.Array.from_buffers(typ, n, [None, pa.py_buffer(np.asarray(values, dtype=_NUMPY[typ]))])
 
 
 def _partial(path: Path) -> Path:

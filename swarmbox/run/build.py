@@ -98,7 +98,7 @@ def medium_of(cfg: DictConfig, time: TimeSource, seed: int, recorder: Recorder,
                      drop_log=recorder.node(NET_ID).appender("messages"))
 
 
-def backend_of(cfg: DictConfig, mission: Mission, tick_s: float, seed: int) -> Any:
+def backend_of(cfg: DictConfig, mission: Mission, tick_s: float, seed: int, run_dir: Path) -> Any:
     params = OmegaConf.to_container(cfg.backend, resolve=True)
     target = params.pop("_target_", None)
     params.pop("name", None)
@@ -111,6 +111,8 @@ def backend_of(cfg: DictConfig, mission: Mission, tick_s: float, seed: int) -> A
         cls = get_class(target)
     except Exception as exc:
         raise ConfigError(f"backend._target_: cannot import '{target}': {exc}") from exc
+    if "run_dir" in params and params["run_dir"] is None:
+        params["run_dir"] = str(run_dir)   # where a backend keeps its own logs (ULogs, vehicle output)
     return cls(homes_ned_m=homes, tick_s=tick_s, rng=rng_for(seed, "backend"),
                obstacles=mission.obstacles, limits=limits, **params)
 
@@ -145,7 +147,7 @@ def build_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> Swarm:
                     mission=info, params=params, rng=rng_for(seed, f"algo/{node_name(node_id)}"))
 
     ground = GroundNode(_algorithm(cfg.algo.ground, GroundAlgorithm, "ground"), **common(GROUND_ID))
-    backend = backend_of(cfg, mission, timing.tick_s, seed)
+    backend = backend_of(cfg, mission, timing.tick_s, seed, recorder.root.parent)
     agents = []
     for i, vehicle in zip(mission.drone_ids, backend.vehicles, strict=True):
         agents.append(AgentNode(i, superior=topo.superiors[i], vehicle=vehicle,

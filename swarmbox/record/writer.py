@@ -113,7 +113,7 @@ NET_TABLES = ("messages",)
 class Recorder:
     """All node logs of one run, under ``<run>/logs/``."""
 
-    def __init__(self, run_dir: Path, flush_rows: int = 200_000) -> None:
+    def __init__(self, run_dir: Path, flush_rows: int = 2_000_000) -> None:
         self.root = Path(run_dir) / "logs"
         self.flush_rows = flush_rows
         self.logs: dict[int, NodeLog] = {}

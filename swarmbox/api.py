@@ -123,6 +123,7 @@ class MissionInfo(NamedTuple):
     initial_positions: Mapping[int, Vec3]
     superiors: Mapping[int, int]
     values: Mapping[int, tuple[float, ...]]
+    obstacles: tuple[Mapping[str, Any], ...] = ()   # static obstacles, as in the mission config
 
 
 class _Context:
@@ -235,6 +236,12 @@ class DroneContext(_Context):
     def last_task(self) -> TaskCommand | None:
         """The most recent TaskCommand received (each one also goes to ``on_task``)."""
         return self._node.last_task
+
+    @property
+    def proximity(self) -> tuple[DescendantState, ...]:
+        """Drones the ground saw within ``run.proximity_m`` of this one (its latest ProxAlert)."""
+        alert = self._node.prox_alert
+        return () if alert is None else alert.neighbours
 
     @property
     def report_data(self) -> str:

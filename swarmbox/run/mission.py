@@ -37,7 +37,8 @@ class Mission:
         return sorted(self.initial_positions)
 
     def info(self) -> MissionInfo:
-        return MissionInfo(self.name, self.swarm_size, self.initial_positions, self.superiors, self.values)
+        return MissionInfo(self.name, self.swarm_size, self.initial_positions, self.superiors, self.values,
+                           tuple(self.obstacles))
 
 
 def _position(drone: Any, pos: Any, where: str) -> tuple[float, float, float]:

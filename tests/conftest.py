@@ -8,10 +8,10 @@ from pathlib import Path
 import pytest
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
-from omegaconf import DictConfig, open_dict
+from omegaconf import DictConfig, OmegaConf, open_dict
 
-from swarmbox.run.config import GROUPS, register
-from swarmbox.run.runner import execute
+from swarmbox.run.config import register
+from swarmbox.run.runner import execute, run_choices
 
 ROOT = Path(__file__).resolve().parents[1]
 CONF = ROOT / "conf"
@@ -23,9 +23,10 @@ def compose_config(overrides: list[str] | tuple[str, ...] = ()) -> tuple[DictCon
     GlobalHydra.instance().clear()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         cfg = compose("config", overrides=list(overrides), return_hydra_config=True)
-    choices = {g: str(cfg.hydra.runtime.choices.get(g)) for g in GROUPS}
+    hydra_choices = OmegaConf.to_container(cfg.hydra.runtime.choices)
     with open_dict(cfg):
         del cfg["hydra"]
+    choices = run_choices(cfg, hydra_choices)
     return cfg, choices
 
 

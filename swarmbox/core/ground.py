@@ -64,7 +64,8 @@ class GroundNode(Node):
             self._check_finished()
             return
         total, alive = self.head_count()
-        if stage is not Stage.ICEBREAK and alive < self.timing.min_alive:
+        if (stage is not Stage.ICEBREAK and alive < self.timing.min_alive
+                and self.time.tick > self.regroup_until_tick):
             self.enter(Stage.ABORT, f"only {alive} of {self.mission.swarm_size} drones alive "
                                     f"(min_alive {self.timing.min_alive})")
             return

@@ -96,6 +96,7 @@ class Node:
         self.inferiors: dict[int, _Inferior] = {}
         self._alive: dict[int, Report] = {}          # latest Report of each alive inferior
         self._alive_view = MappingProxyType(self._alive)
+        self.regroup_until_tick = -1   # a lost inferior's own inferiors may still be handing over
         self._seq = 0
         self._task_seq: dict[int, int] = {}
         self._pending: dict[tuple[int, int], _Pending] = {}
@@ -150,6 +151,9 @@ class Node:
                 inf.alive = False
                 del self._alive[drone_id]
                 self.event("topology", "inferior_lost", drone_id, silent_ticks=inf.silent_ticks)
+                if inf.report.total_count > 1:
+                    # its inferiors notice only after lost_superior_ticks, then hand over to us
+                    self.regroup_until_tick = self.time.tick + self.timing.lost_superior_ticks + limit
                 self._forget_pending(drone_id)
 
     def alive_reports(self) -> Mapping[int, Report]:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import gc
 import heapq
+import itertools
 import json
 import time as wall
 from collections.abc import Callable, Iterator
@@ -57,17 +58,19 @@ class Swarm:
         self.medium, self.backend = medium, backend
         self._event_logs = event_logs
         self._scheduled: list[tuple[float, int, Callable[[Swarm], None]]] = []
+        self._order = itertools.count()   # ties run in the order they were scheduled
+        self._by_id = {a.node_id: a for a in agents}
 
     def schedule(self, at_s: float, action: Callable[[Swarm], None]) -> None:
         """Run ``action(swarm)`` at the first tick at or after true time ``at_s``."""
-        heapq.heappush(self._scheduled, (at_s, len(self._scheduled), action))
+        heapq.heappush(self._scheduled, (at_s, next(self._order), action))
 
     def remove_agent(self, drone_id: int) -> None:
         """The drone's companion computer dies: its node stops and its radio falls silent.
 
         The autopilot, no longer receiving setpoints, lands where it is (its offboard-loss failsafe).
         """
-        agent = self.agents[drone_id]
+        agent = self._by_id[drone_id]
         agent.removed = agent.finished = True
         self.medium.disconnect(drone_id)
         agent.event("failsafe", "node_removed", drone_id, action="land")
@@ -86,7 +89,7 @@ class Swarm:
         for ev in self.backend.drain_events():
             log = self._event_logs.get(ev.drone_id)
             if log is not None:
-                agent = self.agents[ev.drone_id]
+                agent = self._by_id[ev.drone_id]
                 log((agent.clock.now(), t.tick, ev.kind, ev.name, ev.drone_id,
                      json.dumps(ev.data, sort_keys=True, default=str)))
         t.tick += 1

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any, ClassVar, NamedTuple, Optional, final
+from typing import Any, ClassVar, NamedTuple, NoReturn, Optional, final
 
 import numpy as np
 
@@ -54,6 +54,11 @@ class Target(NamedTuple):
             return self.node
         src, dst = self.link
         return dst if dst != GROUND else src
+
+    @property
+    def key(self) -> str:
+        """The target in random-stream names: the node id, or ``src>dst`` for a link."""
+        return str(self.node) if self.link is None else f"{self.link[0]}>{self.link[1]}"
 
     def event_data(self) -> dict[str, Any]:
         if self.link is None:
@@ -120,7 +125,7 @@ class Fault:
         self.p = params
         self.env = env
         self.targets = self._resolve_targets(params.targets)
-        self.rngs = [env.rng_for(f"fault/{self.name}/{k}") for k in range(len(self.targets))]
+        self.rngs = [env.rng_for(f"fault/{self.name}/{t.key}") for t in self.targets]
         self.active = False
         self._validate_timing()
         self.validate()
@@ -171,7 +176,7 @@ class Fault:
         out = {k: v for k, v in asdict(self.p).items() if k != "targets"}
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in out.items()}
 
-    def fail(self, message: str) -> None:
+    def fail(self, message: str) -> NoReturn:
         raise FaultConfigError(f"fault {self.name}: {message}")
 
     # -- helpers for subclasses -------------------------------------------------------------------

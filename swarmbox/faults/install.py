@@ -58,8 +58,8 @@ def install_faults(cfg: DictConfig, swarm: Any, mission: Any, backend: Any,
                    rng_for: Callable[[str], np.random.Generator]) -> list[Fault]:
     """Build, check and schedule every fault of ``cfg.fault`` on ``swarm``; returns them.
 
-    ``rng_for(stream)`` hands out the run's named random streams (fault k of a model draws from
-    ``fault/<model>/<k>``). Raises :class:`FaultConfigError` for an unknown drone, a parameter out
+    ``rng_for(stream)`` hands out the run's named random streams (each target of a model draws from
+    ``fault/<model>/<target>``). Raises :class:`FaultConfigError` for an unknown drone, a parameter out
     of range, an onset after the mission's end, or a fault the backend cannot express.
     """
     backend_cfg = cfg.get("backend")

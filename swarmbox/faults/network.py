@@ -6,8 +6,9 @@ is added at the onset and removed at the end, so a fault costs nothing outside i
 radio — so delays stay symmetric and the analyzer's clock estimation is not fooled; a ``[src, dst]``
 target means that directed link only. Drops carry the reason ``fault:<name>`` in the network log.
 
-Randomness: target k draws from its own generator (``fault/<name>/<k>``), only for the messages it
-matches, in send order — the same config and seed give the same drops and delays.
+Randomness: each target draws from its own generator (``fault/<name>/<target>``, target = the node
+id or ``src>dst``), only for the messages it matches, in send order — the same config and seed give
+the same drops and delays, and adding a target leaves the others' draws unchanged.
 """
 
 from __future__ import annotations

@@ -18,8 +18,8 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig
 
-from swarmbox.run.config import GROUPS, register
-from swarmbox.run.runner import RunExistsError, execute, summary_line
+from swarmbox.run.config import register
+from swarmbox.run.runner import RunExistsError, execute, run_choices, summary_line
 
 CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
 
@@ -30,7 +30,7 @@ register()
 def main(cfg: DictConfig) -> str:
     hc = HydraConfig.get()
     run_dir = Path(cfg.run.out_dir) if cfg.run.out_dir else Path(hc.runtime.output_dir)
-    choices = {g: str(hc.runtime.choices.get(g)) for g in GROUPS}
+    choices = run_choices(cfg, hc.runtime.choices)
     try:
         manifest = execute(cfg, run_dir, choices, list(hc.overrides.task))
     except RunExistsError as exc:

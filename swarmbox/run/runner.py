@@ -26,9 +26,11 @@ from omegaconf import DictConfig, OmegaConf
 from swarmbox import __version__
 from swarmbox.core.messages import GROUND_ID
 from swarmbox.core.swarm import Swarm, gc_paused
+from swarmbox.faults import FaultConfigError, describe
 from swarmbox.record.schema import SCHEMA_VERSION, node_name
 from swarmbox.record.writer import Recorder
 from swarmbox.run import build, mission
+from swarmbox.run.config import GROUPS
 
 _PROJECT_ROOT = Path(__file__).resolve().parents[2]
 
@@ -74,6 +76,16 @@ def _progress(label: str):
             print(f"[{label}] t={swarm.time.t_s:7.1f} s  ground {g.stage.name:<11}  "
                   f"{alive}/{g.mission.swarm_size} drones alive", file=sys.stderr, flush=True)
     return report
+
+
+def run_choices(cfg: DictConfig, hydra_choices: Any) -> dict[str, str]:
+    """The config group chosen for each swappable part (composed faults: ``a+b``)."""
+    choices = {g: str(hydra_choices.get(g)) for g in GROUPS}
+    try:
+        choices["fault"] = describe(cfg.fault)
+    except FaultConfigError:
+        pass   # the run itself reports the bad fault config, naming it
+    return choices
 
 
 def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: list[str],

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from swarmbox.hal.launch import ProcessSet
 from swarmbox.hal.mavlink_frames import GeoFrame
 from swarmbox.hal.px4 import BootClock, Px4Backend
 from swarmbox.hal.safety import SafetyLimits
@@ -56,8 +57,10 @@ def proc_stats(pid: int) -> dict[str, float]:
     return out
 
 
-class MavsimLauncher:
+class MavsimLauncher(ProcessSet):
     """Starts one ``python -m swarmbox.hal.mavsim`` per vehicle on the bridge's ports."""
+
+    what = "mavsim vehicle"
 
     def __init__(self, homes: list[Vec3], frame: GeoFrame, speed: float, seeds: list[int],
                  options: MavsimOptions, run_dir: Path | None) -> None:
@@ -101,19 +104,6 @@ class MavsimLauncher:
             return (self.log_dir / f"vehicle_{i}.log").read_text(errors="replace")[-2000:]
         except OSError:
             return ""
-
-    def check(self) -> None:
-        for i, proc in enumerate(self.procs):
-            if proc.poll() is not None:
-                raise RuntimeError(f"mavsim vehicle {i} exited with code {proc.returncode}:\n{self._tail(i)}")
-
-    def poll_exits(self) -> list[tuple[int, int]]:
-        out = []
-        for i, proc in enumerate(self.procs):
-            if i not in self._reported and proc.poll() is not None:
-                self._reported.add(i)
-                out.append((i, int(proc.returncode)))
-        return out
 
     def stop(self) -> None:
         if self._stopped:

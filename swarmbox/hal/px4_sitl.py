@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from swarmbox.hal.launch import ProcessSet
 from swarmbox.hal.mavlink_frames import GeoFrame
 
 if TYPE_CHECKING:
@@ -98,8 +99,10 @@ def instance_env(home_geo: tuple[float, float, float], options: SitlOptions, spe
     return env
 
 
-class SitlLauncher:
+class SitlLauncher(ProcessSet):
     """Starts, watches and stops N PX4 SITL instances (a :class:`~swarmbox.hal.px4.Launcher`)."""
+
+    what = "PX4 instance"
 
     def __init__(self, params: Px4Params, homes: list[Vec3], frame: GeoFrame, run_dir: Path | None) -> None:
         self.build = find_build(params.px4_build or "")
@@ -138,19 +141,6 @@ class SitlLauncher:
             except OSError:
                 pass
         return "\n".join(text)
-
-    def check(self) -> None:
-        for i, proc in enumerate(self.procs):
-            if proc.poll() is not None:
-                raise RuntimeError(f"PX4 instance {i} exited with code {proc.returncode}:\n{self._tail(i)}")
-
-    def poll_exits(self) -> list[tuple[int, int]]:
-        out = []
-        for i, proc in enumerate(self.procs):
-            if i not in self._reported and proc.poll() is not None:
-                self._reported.add(i)
-                out.append((i, int(proc.returncode)))
-        return out
 
     def stop(self) -> None:
         if self._stopped:

@@ -1,0 +1,35 @@
+"""What every launcher of vehicle processes (PX4 SITL instances, mavsim vehicles) shares."""
+
+from __future__ import annotations
+
+import subprocess
+
+
+class ProcessSet:
+    """Exit checks over a launcher's vehicle processes.
+
+    Subclasses set ``procs`` (one process per vehicle, in vehicle order), ``_reported`` (a set) and
+    ``what`` (how a process is named in messages), and may override ``_tail`` (its recent output).
+    """
+
+    what = "vehicle process"
+    procs: list[subprocess.Popen[bytes]]
+    _reported: set[int]
+
+    def _tail(self, i: int) -> str:
+        return ""
+
+    def check(self) -> None:
+        """Raise if a vehicle process has exited, with the end of its output."""
+        for i, proc in enumerate(self.procs):
+            if proc.poll() is not None:
+                raise RuntimeError(f"{self.what} {i} exited with code {proc.returncode}:\n{self._tail(i)}")
+
+    def poll_exits(self) -> list[tuple[int, int]]:
+        """(vehicle, exit code) of every process that exited since the last call."""
+        out = []
+        for i, proc in enumerate(self.procs):
+            if i not in self._reported and proc.poll() is not None:
+                self._reported.add(i)
+                out.append((i, int(proc.returncode)))
+        return out

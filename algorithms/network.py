@@ -6,13 +6,14 @@ per cell) and, with ``broadcast_positions``, every drone's reported position and
 never sends a position command. Each drone runs a local coverage-control rule (Lloyd's algorithm
 restricted to what it senses): it takes the demand-weighted centroid of the part of its
 neighbourhood (``sense_radius_m``) that is nearer to it than to any other drone it knows of, and
-flies towards it with a velocity setpoint; with no demand in that region it heads for the nearest
-demand cell that no drone it knows of serves yet. A repulsion within ``separation_m`` spreads
-crowds and keeps drones apart, and the drones fly on ``layers`` altitudes. Neighbours' positions come
-from their Heartbeats when the topology sets ``peers: all`` (fresh, for small swarms), otherwise
-from the ground's broadcast, moved on by the broadcast velocity for the broadcast's age (1 Hz,
-scales to hundreds of drones). The ground marks the fraction of the demand within
-``coverage_radius_m`` of some drone (``demand_coverage``).
+flies towards it with a velocity setpoint. A drone with no demand in that region, or a redundant
+one (all the demand within its ``coverage_radius_m`` is also within that of another drone), heads
+instead for the nearest demand cell no drone it knows of serves yet. A repulsion within
+``separation_m`` spreads crowds and keeps drones apart, and the drones fly on ``layers``
+altitudes. Neighbours' positions come from their Heartbeats when the topology sets ``peers: all``
+(fresh, for small swarms), otherwise from the ground's broadcast, moved on by the broadcast
+velocity for the broadcast's age (1 Hz, scales to hundreds of drones). The ground marks the
+fraction of the demand within ``coverage_radius_m`` of some drone (``demand_coverage``).
 
 Demand schedule (as the reference): the whole area for ``warmup_s``, then each quadrant of
 ``schedule`` for ``phase_s``, then the whole area again; drones complete after ``duration_s``.
@@ -20,6 +21,15 @@ Demand schedule (as the reference): the whole area for ``warmup_s``, then each q
 Mission data: ``values`` ``0: [north_min, east_min]``, ``1: [north_max, east_max]`` (the area),
 ``2: [rows, cols]`` (the heat map's cells; row = north, column = east) and, optionally,
 ``3: [warmup_s, phase_s, duration_s]`` (replaces those params: larger swarms need longer phases).
+
+Params (``conf/algo/network.yaml``): ``altitude_m``, ``layers``, ``layer_step_m`` (altitude of
+layer k: altitude_m + k × layer_step_m, by id rank), ``broadcast_period_s``,
+``broadcast_positions``, ``warmup_s``, ``phase_s``, ``schedule`` (quadrants: sw, se, ne, nw),
+``duration_s``, ``coverage_radius_m``, ``sense_radius_m``, ``sample_m`` (sample spacing of the
+local demand integral), ``update_period_s`` (target recomputation), ``control_period_s`` (velocity
+recomputation; held in between), ``gain_1_s`` (velocity per metre to the target),
+``max_speed_m_s``, ``separation_m`` and ``repulsion_gain_m_s`` (repulsion speed at contact,
+falling linearly to 0 at ``separation_m``).
 
 Differences from the reference implementation (ref-algorithms §11, §15): the velocity is
 recomputed ten times a second from the drone's own position (the reference held a 1 Hz velocity;

@@ -20,6 +20,14 @@ time it sees a package there: the delivery-wait metric. A drone marks ``arrived`
 point. A drone is complete once its work is closed (PLAN or END received), nothing is left and it is
 back home; the ground holds EXECUTION open until every package has been reported delivered.
 All commands are reliable (acknowledged and re-sent), so a lost message cannot stall the mission.
+Packages of a drone that is lost are not handed to another one: the mission then ends with the
+EXECUTION timeout (status aborted, with the reason).
+
+Params (``conf/algo/delivery_base.yaml``): ``sort`` (none | azimuth | distance), ``assign`` (block |
+rr | dynamic), ``cruise_altitude_m``, ``altitude_step_m``, ``arrival_tolerance_m``,
+``arrival_speed_m_s``. Markers: ground ``plan`` (sort, assign, packages, order), ``assigned`` (drone,
+packages), ``delivered`` (package, drone, count), ``duplicate`` (package, drone, first_drone);
+drone ``received`` (packages), ``arrived`` (package, north_m, east_m), ``returned`` (package).
 
 Difference from the reference implementation: its drones kept their packages in an id-ordered map
 and always flew the smallest undelivered id, so in the pre-assigned modes the sorting rule chose

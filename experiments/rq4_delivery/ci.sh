@@ -13,7 +13,8 @@ PYTHON=${PYTHON:-python3}
 work=$(mktemp -d "${TMPDIR:-/tmp}/rq4_ci.XXXXXX")
 trap 'rm -rf "$work"' EXIT
 
-"$PYTHON" -m swarmbox.run -m +experiment=rq4_delivery_ci "hydra.sweep.dir=$work/sweep" >"$work/sweep.log" 2>&1 \
+"$PYTHON" -m swarmbox.run -m +experiment=rq4_delivery_ci "~hydra.callbacks.analyze" "hydra.sweep.dir=$work/sweep" \
+  >"$work/sweep.log" 2>&1 \
   || { tail -n 40 "$work/sweep.log"; echo "rq4 ci: the sweep failed" >&2; exit 3; }
 tail -n 1 "$work/sweep.log"
 "$PYTHON" -m swarmbox.analyze "$work/sweep" --no-figures --n-boot 200 >"$work/analyze.log" 2>&1 \

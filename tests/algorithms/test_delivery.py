@@ -36,7 +36,7 @@ from algorithms.delivery_plan import (
 )
 from swarmbox.run.build import rng_for
 from swarmbox.run.mission import load
-from tests.conftest import CONF, compose_config, run_config, table
+from tests.conftest import CONF, ROOT, compose_config, run_config, table
 
 ALGOS = [f"delivery_{s}_{a}" for s in SORTS for a in ASSIGNS]
 SMALL = ("mission=delivery", "mission.generator.count=15", "mission.generator.half_size_m=50")
@@ -180,6 +180,8 @@ def test_scale_missions_use_grids_and_paper_dataset_one(mission, drones, package
     assert m.initial_positions[side + 1] == (5.0, 5.0, 0.0)
     assert m.initial_positions[drones - 1] == (5.0 * (side - 1), 5.0 * (side - 1), 0.0)
     assert {k: list(v) for k, v in m.values.items()} == paper_points(dataset=1, count=packages)
+    top_alt_m = 10.0 + 2.0 * (drones - 1)   # the last drone lands from here at 0.7 m/s (+2 s disarm)
+    assert cfg.run.timeouts_s.LANDING > top_alt_m / 0.7 + 2.0
 
 
 # -- flown missions ------------------------------------------------------------------------------
@@ -332,3 +334,16 @@ def test_unknown_sort_fails_the_run_with_the_allowed_values(tmp_path):
     manifest = run_config(tmp_path / "r", ["algo=delivery_base", "algo.params.sort=spiral", *SMALL])
     assert manifest["status"] == "failed"
     assert "unknown sort 'spiral'; allowed values: none, azimuth, distance" in manifest["reason"]
+
+
+def test_ci_baseline_covers_every_algorithm_and_its_tolerances_load():
+    from swarmbox.analysis.compare import load_config, load_summary
+
+    base = ROOT / "results" / "baselines" / "rq4_ci"
+    summary = load_summary(base / "summary.csv")
+    assert set(summary["algo"]) == set(ALGOS)
+    counts = summary[summary["metric"] == "delivery_wait_s_count"].set_index("algo")["value"]
+    assert (counts == N_SMALL).all()
+    config = load_config(base / "tolerances.yaml")
+    assert config.tolerance("real_time_factor", "higher").ignore
+    assert config.tolerance("delivery_wait_s_count", "higher").atol == 0.5

@@ -21,6 +21,7 @@ flagged drone (the highest score in that window; ties go to the larger deviation
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -38,12 +39,16 @@ class OutlierTest:
     min_n: int = 3
 
 
-def default_tests(k: float = 1.5) -> dict[str, OutlierTest]:
-    """Monitored metrics with their minimum deviations (1 ms, 5 % loss, 1.5 m discrepancy)."""
-    return {
+def default_tests(k: float = 1.5, min_deviation: Mapping[str, float] | None = None) -> dict[str, OutlierTest]:
+    """Monitored metrics with their minimum deviations (1 ms, 5 % loss, 1.5 m discrepancy),
+    overridden per metric by ``min_deviation``."""
+    tests = {
         "latency_ms": OutlierTest(k, 1.0), "loss_ratio": OutlierTest(k, 0.05),
         "disc_n_m": OutlierTest(k, 1.5), "disc_e_m": OutlierTest(k, 1.5), "disc_d_m": OutlierTest(k, 1.5),
     }
+    for name, dev in (min_deviation or {}).items():
+        tests[name] = OutlierTest(k, dev)
+    return tests
 
 
 @dataclass(frozen=True, slots=True)

@@ -69,10 +69,7 @@ class DiagnosisOptions:
     min_deviation: dict[str, float] = field(default_factory=dict)   # overrides per metric
 
     def tests(self) -> dict[str, anomaly.OutlierTest]:
-        tests = anomaly.default_tests(self.iqr_k)
-        for name, dev in self.min_deviation.items():
-            tests[name] = anomaly.OutlierTest(self.iqr_k, dev)
-        return tests
+        return anomaly.default_tests(self.iqr_k, self.min_deviation)
 
 
 @dataclass

@@ -29,10 +29,7 @@ class AnalysisOptions:
     fault_target: int | None = None
 
     def tests(self) -> dict[str, anomaly.OutlierTest]:
-        tests = anomaly.default_tests(self.iqr_k)
-        for name, dev in self.min_deviation.items():
-            tests[name] = anomaly.OutlierTest(self.iqr_k, dev)
-        return tests
+        return anomaly.default_tests(self.iqr_k, self.min_deviation)
 
 
 @dataclass

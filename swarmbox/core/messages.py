@@ -25,10 +25,6 @@ def make_msg_id(src: int, seq: int) -> int:
     return ((src + 2) << 40) | seq
 
 
-def msg_sender(msg_id: int) -> int:
-    return (msg_id >> 40) - 2
-
-
 class Heartbeat(NamedTuple):
     """Superior -> its inferiors (and any subscribed peer), every tick.
 

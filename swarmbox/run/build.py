@@ -165,6 +165,3 @@ def build_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> Swarm:
     install_faults(cfg, swarm, mission, backend, lambda stream: rng_for(seed, stream))
     return swarm
 
-
-def run_dir_of(cfg: DictConfig, default: str | Path) -> Path:
-    return Path(cfg.run.out_dir) if cfg.run.out_dir else Path(default)

@@ -37,7 +37,8 @@ from pathlib import Path
 
 import yaml
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parent   # holds algorithms/ and conf/
+PACKAGE = "swarmbox.algorithms"
 
 #: Paper Table 1: (legacy boilerplate, legacy core, C++ port boilerplate, C++ port core) per
 #: algorithm, and the name of our port's algo config.
@@ -116,7 +117,9 @@ class AlgorithmLoc:
 
 
 def _module_file(root: Path, dotted: str) -> Path | None:
-    path = root.joinpath(*dotted.split(".")).with_suffix(".py")
+    if not dotted.startswith(PACKAGE + "."):
+        return None
+    path = (root / "algorithms").joinpath(*dotted[len(PACKAGE) + 1:].split(".")).with_suffix(".py")
     return path if path.is_file() else None
 
 
@@ -126,12 +129,12 @@ def _direct_imports(root: Path, path: Path) -> tuple[Path, ...]:
     names: list[str] = []
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.ImportFrom) and node.level == 1 and path.parent == root / "algorithms":
-            names += [f"algorithms.{node.module}"] if node.module else [f"algorithms.{a.name}"
+            names += [f"{PACKAGE}.{node.module}"] if node.module else [f"{PACKAGE}.{a.name}"
                                                                         for a in node.names]
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            names += [node.module] if node.module.startswith("algorithms.") else []
+            names += [node.module] if node.module.startswith(PACKAGE + ".") else []
         elif isinstance(node, ast.Import):
-            names += [a.name for a in node.names if a.name.startswith("algorithms.")]
+            names += [a.name for a in node.names if a.name.startswith(PACKAGE + ".")]
     return tuple(f for f in (_module_file(root, n) for n in names) if f is not None)
 
 

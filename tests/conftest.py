@@ -14,7 +14,7 @@ from swarmbox.run.config import register
 from swarmbox.run.runner import execute, run_choices
 
 ROOT = Path(__file__).resolve().parents[1]
-CONF = ROOT / "conf"
+CONF = ROOT / "swarmbox" / "conf"
 
 register()
 

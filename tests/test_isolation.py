@@ -22,7 +22,7 @@ def imports(path: Path) -> set[str]:
 
 
 def test_algorithms_import_only_the_api():
-    for path in sorted((ROOT / "algorithms").rglob("*.py")):
+    for path in sorted((ROOT / "swarmbox" / "algorithms").rglob("*.py")):
         for mod in imports(path):
             if mod.startswith("swarmbox"):
                 assert mod == "swarmbox.api", f"{path.name} imports {mod}"

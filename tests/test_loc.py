@@ -66,7 +66,7 @@ def _tiny_project(root):
     (root / "algorithms" / "demo_util.py").write_text("def half(x):\n    # why: a helper\n    return x / 2\n")
     (root / "algorithms" / "stray.py").write_text("X = 1\n")
     (root / "conf" / "algo" / "demo_base.yaml").write_text(
-        "# base\nname: demo\ndrone:\n  _target_: algorithms.demo.DemoDrone\n")
+        "# base\nname: demo\ndrone:\n  _target_: swarmbox.algorithms.demo.DemoDrone\n")
     (root / "conf" / "algo" / "demo_fast.yaml").write_text(
         "defaults:\n  - demo_base\n  - _self_\nparams:\n  speed: 9\n")
 

@@ -22,10 +22,10 @@ def test_every_algo_config_composes_and_instantiates(name):
 
 
 def _algorithm_classes():
-    for path in sorted((ROOT / "algorithms").glob("*.py")):
+    for path in sorted((ROOT / "swarmbox" / "algorithms").glob("*.py")):
         if path.stem.startswith("_"):
             continue
-        module = importlib.import_module(f"algorithms.{path.stem}")
+        module = importlib.import_module(f"swarmbox.algorithms.{path.stem}")
         for _, cls in inspect.getmembers(module, inspect.isclass):
             if cls.__module__ == module.__name__ and issubclass(cls, DroneAlgorithm | GroundAlgorithm):
                 yield f"{cls.__module__}.{cls.__qualname__}"

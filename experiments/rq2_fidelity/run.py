@@ -47,7 +47,7 @@ def run_one(run_dir: Path, overrides: list[str]) -> int:
 
     register()
     overrides = [*overrides, f"run.out_dir={run_dir}", "run.progress=false"]
-    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+    with initialize_config_dir(config_dir=str(ROOT / "swarmbox" / "conf"), version_base="1.3"):
         cfg = compose("config", overrides=overrides, return_hydra_config=True)
     choices = {g: str(cfg.hydra.runtime.choices.get(g)) for g in GROUPS}
     with open_dict(cfg):

@@ -1,6 +1,6 @@
 """GNSS faults: drift, bias, noise increase, dropout.
 
-They act on the backend's GNSS fault inputs (see :class:`swarmbox.hal.sim.SimBackend`):
+They act on the backend's GNSS fault inputs (see :class:`swarmbox.hal.sim.backend.SimBackend`):
 ``gnss_offset_ned_m`` (N, 3) is added to every fix, ``gnss_noise_scale`` (N,) multiplies the fix
 noise, ``gnss_available`` (N,) False stops the fixes. A backend without these inputs cannot express
 the faults and the run is refused at start-up. The faults compose: offsets add, noise scales

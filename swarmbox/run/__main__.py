@@ -21,7 +21,7 @@ from omegaconf import DictConfig
 from swarmbox.run.config import register
 from swarmbox.run.runner import RunExistsError, execute, run_choices, summary_line
 
-CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
+CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
 
 register()
 

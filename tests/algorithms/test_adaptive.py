@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 from omegaconf import OmegaConf, open_dict
 
-from algorithms.adaptive_plan import avoid, clearance, edge_free, resample, rrt, shortcut, surface
+from swarmbox.algorithms.adaptive_plan import avoid, clearance, edge_free, resample, rrt, shortcut, surface
 from swarmbox.run.runner import execute
 from tests.conftest import CONF, compose_config, table
 

@@ -6,7 +6,7 @@ import math
 import pytest
 from omegaconf import open_dict
 
-from algorithms.airview import CoverageMap, assign_sectors, lawnmower, split_area
+from swarmbox.algorithms.airview import CoverageMap, assign_sectors, lawnmower, split_area
 from swarmbox.run.runner import execute
 from tests.conftest import compose_config, table
 

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 from omegaconf import open_dict
 
-from algorithms.chevron import FOLLOW, RETURN, circle_angle, circle_point
+from swarmbox.algorithms.chevron import FOLLOW, RETURN, circle_angle, circle_point
 from swarmbox.run.runner import execute
 from tests.conftest import compose_config, table
 

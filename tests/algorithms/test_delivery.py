@@ -19,8 +19,8 @@ from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 from hydra.utils import get_class
 
-from algorithms.delivery import DeliveryDrone, DeliveryGround
-from algorithms.delivery_plan import (
+from swarmbox.algorithms.delivery import DeliveryDrone, DeliveryGround
+from swarmbox.algorithms.delivery_plan import (
     ASSIGNS,
     SORTS,
     Package,

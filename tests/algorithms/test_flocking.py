@@ -8,7 +8,7 @@ import pytest
 from omegaconf import OmegaConf, open_dict
 from scipy.spatial import cKDTree
 
-from algorithms.flocking import braking_curve, flocking_velocities, nearest_surface, order_parameter
+from swarmbox.algorithms.flocking import braking_curve, flocking_velocities, nearest_surface, order_parameter
 from swarmbox.run.runner import execute
 from tests.conftest import CONF, compose_config, table
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from omegaconf import open_dict
 
-from algorithms.network import decode, demand_coverage, demand_map, encode, phase_at
+from swarmbox.algorithms.network import decode, demand_coverage, demand_map, encode, phase_at
 from swarmbox.run.runner import execute
 from tests.conftest import compose_config, table
 

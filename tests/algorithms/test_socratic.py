@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 from omegaconf import OmegaConf, open_dict
 
-from algorithms.socratic import SocraticGround, decode_points, tile_centres
+from swarmbox.algorithms.socratic import SocraticGround, decode_points, tile_centres
 from swarmbox.run.runner import execute
 from tests.conftest import CONF, compose_config, table
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from omegaconf import open_dict
 
-from algorithms.tracking import RandomWalkTarget, ring_slots, sector_of, standby_points
+from swarmbox.algorithms.tracking import RandomWalkTarget, ring_slots, sector_of, standby_points
 from swarmbox.run.runner import execute
 from tests.conftest import compose_config, table
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from swarmbox.api import Setpoint
-from swarmbox.hal.sim import SimBackend
+from swarmbox.hal.sim.backend import SimBackend
 
 TICK_S = 0.025
 

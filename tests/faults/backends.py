@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from swarmbox.hal.sim import SimBackend
+from swarmbox.hal.sim.backend import SimBackend
 
 
 class BareBackend:

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from swarmbox.api import Setpoint
-from swarmbox.hal import mavlink_codec as mc
-from swarmbox.hal.mavlink_frames import GeoFrame
-from swarmbox.hal.mavsim import VEHICLE_LIMITS, ports_of
-from swarmbox.hal.mavsim_vehicle import Commander
-from swarmbox.hal.sim import SimBackend
+from swarmbox.hal.mavlink import codec as mc
+from swarmbox.hal.mavlink.frames import GeoFrame
+from swarmbox.hal.mavsim.process import VEHICLE_LIMITS, ports_of
+from swarmbox.hal.mavsim.commander import Commander
+from swarmbox.hal.sim.backend import SimBackend
 
 ROOT = Path(__file__).resolve().parents[2]
 DT = 0.01
@@ -164,7 +164,7 @@ class Gcs:
 @pytest.fixture
 def vehicle():
     gcs = Gcs()
-    cmd = [sys.executable, "-m", "swarmbox.hal.mavsim", "--instance", "2", "--home-n", "10", "--home-e", "-5",
+    cmd = [sys.executable, "-m", "swarmbox.hal.mavsim.process", "--instance", "2", "--home-n", "10", "--home-e", "-5",
            "--port-plan", f"{gcs.port}:0", "--speed", "4", "--max-wall-s", "60"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from swarmbox.hal import mavlink_codec as mc
+from swarmbox.hal.mavlink import codec as mc
 from tests.conftest import table
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -90,7 +90,7 @@ def free_ports(n: int) -> list[int]:
 
 def test_px4_backend_flies_running_mavsim_instances(run):
     ports = free_ports(4)
-    procs = [subprocess.Popen([sys.executable, "-m", "swarmbox.hal.mavsim", "--instance", str(i),
+    procs = [subprocess.Popen([sys.executable, "-m", "swarmbox.hal.mavsim.process", "--instance", str(i),
                                "--home-n", str(5.0 * i), "--port-plan", f"{port}:0", "--speed", "4",
                                "--max-wall-s", "120"], cwd=ROOT, stdout=subprocess.DEVNULL,
                               stderr=subprocess.DEVNULL) for i, port in enumerate(ports)]
@@ -125,8 +125,8 @@ def test_runner_stays_small(tmp_path):
 
 
 def test_px4_path_imports_neither_the_simulator_nor_analysis_libraries():
-    code = ("import sys, swarmbox.hal.px4, swarmbox.hal.px4_sitl, swarmbox.hal.mavsim_fleet; "
-            "print(sorted({'pandas', 'matplotlib', 'seaborn', 'pymunk', 'swarmbox.hal.sim', 'pyulog'} "
+    code = ("import sys, swarmbox.hal.px4.backend, swarmbox.hal.px4.sitl, swarmbox.hal.mavsim.backend; "
+            "print(sorted({'pandas', 'matplotlib', 'seaborn', 'pymunk', 'swarmbox.hal.sim.backend', 'pyulog'} "
             "& set(sys.modules)))")
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0 and proc.stdout.strip() == "[]", proc.stdout + proc.stderr

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from swarmbox.api import FlightMode, Setpoint
-from swarmbox.hal import mavlink_codec as mc
-from swarmbox.hal.mavsim_fleet import MavsimBackend
-from swarmbox.hal.px4 import Px4Backend, Px4Params, boot_clock_fit
+from swarmbox.hal.mavlink import codec as mc
+from swarmbox.hal.mavsim.backend import MavsimBackend
+from swarmbox.hal.px4.backend import Px4Backend, Px4Params, boot_clock_fit
 from swarmbox.testing import BACKEND_CHECKS, Flight
 
 SPEED = 4.0

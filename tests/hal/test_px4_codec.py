@@ -7,9 +7,9 @@ import math
 import pytest
 
 from swarmbox.api import FlightMode, Setpoint, SetpointKind
-from swarmbox.hal import mavlink_codec as mc
-from swarmbox.hal.mavlink_frames import EARTH_RADIUS_M, GeoFrame, VehicleFrame
-from swarmbox.hal.mavlink_link import Command, CommandTracker, parse_connection
+from swarmbox.hal.mavlink import codec as mc
+from swarmbox.hal.mavlink.frames import EARTH_RADIUS_M, GeoFrame, VehicleFrame
+from swarmbox.hal.mavlink.link import Command, CommandTracker, parse_connection
 
 SPO = mc.MSG["SET_POSITION_TARGET_LOCAL_NED"]
 

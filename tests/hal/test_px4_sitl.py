@@ -11,9 +11,9 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from swarmbox.hal.mavlink_frames import GeoFrame
-from swarmbox.hal.mavlink_link import parse_connection
-from swarmbox.hal.px4_sitl import SitlOptions, connection_of, find_build, instance_env, write_ulog_table
+from swarmbox.hal.mavlink.frames import GeoFrame
+from swarmbox.hal.mavlink.link import parse_connection
+from swarmbox.hal.px4.sitl import SitlOptions, connection_of, find_build, instance_env, write_ulog_table
 from tests.conftest import table
 
 PX4_BUILD = os.environ.get("SWARMBOX_PX4_BUILD")
@@ -104,7 +104,7 @@ def test_hover_on_px4_sitl(run, tmp_path):
 FAKE_PX4 = """#!/bin/sh
 # Stands in for PX4's binary (`px4 -i N -d ETC`): a mavsim vehicle on PX4's port plan and home.
 mkdir -p log/2025-01-01 && cp "$(dirname "$0")/../fake.ulg" log/2025-01-01/10_00_00.ulg
-exec "$SWARMBOX_TEST_PYTHON" -m swarmbox.hal.mavsim --instance "$2" --home-lat "$PX4_HOME_LAT" \\
+exec "$SWARMBOX_TEST_PYTHON" -m swarmbox.hal.mavsim.process --instance "$2" --home-lat "$PX4_HOME_LAT" \\
     --home-lon "$PX4_HOME_LON" --home-alt "$PX4_HOME_ALT" --port-plan px4 \\
     --speed "${PX4_SIM_SPEED_FACTOR:-1}" --max-wall-s 120
 """
@@ -127,7 +127,7 @@ def test_launcher_runs_eleven_instances_on_px4_port_plan(tmp_path, monkeypatch):
     pinned remote port past instance 9, homes from PX4_HOME_*, ULogs collected at close()."""
     import sys
 
-    from swarmbox.hal.px4 import Px4Backend
+    from swarmbox.hal.px4.backend import Px4Backend
     from swarmbox.testing import Flight
 
     n = 11

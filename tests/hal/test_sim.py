@@ -12,11 +12,11 @@ import yaml
 
 from swarmbox.api import FlightMode, Setpoint, Telemetry
 from swarmbox.hal.safety import SafetyLimits
-from swarmbox.hal.sim import SimBackend, SimParams
+from swarmbox.hal.sim.backend import SimBackend, SimParams
 from swarmbox.testing import BACKEND_CHECKS, Flight
 
 TICK_S = 0.025
-CONF = Path(__file__).resolve().parents[2] / "conf" / "backend" / "sim.yaml"
+CONF = Path(__file__).resolve().parents[2] / "swarmbox" / "conf" / "backend" / "sim.yaml"
 
 
 def make(homes=((0.0, 0.0, 0.0),), seed: int = 0, **kw) -> SimBackend:
@@ -379,7 +379,7 @@ def test_bad_param_value_raises():
 
 def test_yaml_lists_every_param_with_its_default():
     conf = yaml.safe_load(CONF.read_text())
-    assert conf.pop("name") == "sim" and conf.pop("_target_") == "swarmbox.hal.sim.SimBackend"
+    assert conf.pop("name") == "sim" and conf.pop("_target_") == "swarmbox.hal.sim.backend.SimBackend"
     assert list(conf) == [f.name for f in fields(SimParams)]
     assert SimParams(**conf) == SimParams()
     make(**conf)

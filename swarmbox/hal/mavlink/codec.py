@@ -1,0 +1,370 @@
+"""MAVLink <-> SwarmBox: the one module that knows MAVLink's messages, units and PX4's modes.
+
+Everything that crosses a MAVLink link is converted here, in both directions:
+
+- **framing**: a UDP datagram is split into MAVLink 1/2 packets by their headers, so packets the
+  caller does not want are skipped without being decoded (a Python process decodes a few thousand
+  packets a second; a PX4 instance streams about 400);
+- **decoding** into small named tuples with SI units in the names (``LocalPositionMsg`` ...);
+- **encoding** of what a ground station sends (:class:`GcsEncoder`): heartbeats, COMMAND_LONG and
+  SET_POSITION_TARGET_LOCAL_NED with the type mask of a :class:`~swarmbox.api.Setpoint`;
+- **PX4 custom modes** <-> :class:`~swarmbox.api.FlightMode`.
+
+Positions and frames (geodetic, vehicle-local, mission) are :mod:`swarmbox.hal.mavlink.frames`.
+
+The vehicle side (what an autopilot sends) is encoded by :mod:`swarmbox.hal.mavsim.link` with the
+same constants.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator
+from typing import Any, NamedTuple
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from swarmbox.api import FlightMode, Setpoint, SetpointKind
+
+Vec3 = tuple[float, float, float]
+MAVError = mavlink.MAVError
+
+# ---- identifiers --------------------------------------------------------------------------------
+MSG = {name[len("MAVLINK_MSG_ID_"):]: value for name, value in vars(mavlink).items()
+       if name.startswith("MAVLINK_MSG_ID_") and isinstance(value, int)}
+CMD_SET_MODE = mavlink.MAV_CMD_DO_SET_MODE                      # 176
+CMD_ARM_DISARM = mavlink.MAV_CMD_COMPONENT_ARM_DISARM           # 400
+CMD_TAKEOFF = mavlink.MAV_CMD_NAV_TAKEOFF                       # 22
+CMD_LAND = mavlink.MAV_CMD_NAV_LAND                             # 21
+CMD_RTL = mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH                  # 20
+CMD_SET_MESSAGE_INTERVAL = mavlink.MAV_CMD_SET_MESSAGE_INTERVAL  # 511
+CMD_REQUEST_MESSAGE = mavlink.MAV_CMD_REQUEST_MESSAGE           # 512
+RESULT_ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
+RESULT_TEMPORARILY_REJECTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+RESULT_DENIED = mavlink.MAV_RESULT_DENIED
+RESULT_UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
+RESULT_FAILED = mavlink.MAV_RESULT_FAILED
+RESULT_IN_PROGRESS = mavlink.MAV_RESULT_IN_PROGRESS
+RESULT_NAMES = {v: k[len("MAV_RESULT_"):].lower() for k, v in vars(mavlink).items()
+                if k.startswith("MAV_RESULT_") and k != "MAV_RESULT_ENUM_END" and isinstance(v, int)}
+COMMAND_NAMES = {CMD_SET_MODE: "set_mode", CMD_ARM_DISARM: "arm_disarm", CMD_TAKEOFF: "takeoff",
+                 CMD_LAND: "land", CMD_RTL: "return_to_launch",
+                 CMD_SET_MESSAGE_INTERVAL: "set_message_interval", CMD_REQUEST_MESSAGE: "request_message"}
+PREARM_CHECK_BIT = mavlink.MAV_SYS_STATUS_PREARM_CHECK          # SYS_STATUS health: ready to arm
+ARMED_FLAG = mavlink.MAV_MODE_FLAG_SAFETY_ARMED                 # HEARTBEAT base_mode
+CUSTOM_MODE_FLAG = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+LANDED_ON_GROUND = mavlink.MAV_LANDED_STATE_ON_GROUND
+LANDED_IN_AIR = mavlink.MAV_LANDED_STATE_IN_AIR
+LANDED_TAKEOFF = mavlink.MAV_LANDED_STATE_TAKEOFF
+LANDED_LANDING = mavlink.MAV_LANDED_STATE_LANDING
+FRAME_LOCAL_NED = mavlink.MAV_FRAME_LOCAL_NED
+FORCE_MAVLINK2 = 2
+
+# ---- PX4 custom modes: custom_mode = main << 16 | sub << 24 -------------------------------------
+
+
+def px4_mode(main: int, sub: int = 0) -> int:
+    return (main << 16) | (sub << 24)
+
+
+def px4_main_sub(custom_mode: int) -> tuple[int, int]:
+    return (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
+
+
+MODE_POSCTL = px4_mode(3)
+MODE_OFFBOARD = px4_mode(6)
+MODE_TAKEOFF = px4_mode(4, 2)
+MODE_HOLD = px4_mode(4, 3)          # AUTO.LOITER, PX4's mode after boot
+MODE_MISSION = px4_mode(4, 4)
+MODE_RTL = px4_mode(4, 5)
+MODE_LAND = px4_mode(4, 6)
+MODE_NAMES = {MODE_POSCTL: "POSCTL", MODE_OFFBOARD: "OFFBOARD", MODE_TAKEOFF: "AUTO.TAKEOFF",
+              MODE_HOLD: "AUTO.LOITER", MODE_MISSION: "AUTO.MISSION", MODE_RTL: "AUTO.RTL",
+              MODE_LAND: "AUTO.LAND", px4_mode(1): "MANUAL", px4_mode(2): "ALTCTL", px4_mode(7): "STABILIZED"}
+_AUTO_MODES = {MODE_OFFBOARD: FlightMode.OFFBOARD, MODE_TAKEOFF: FlightMode.TAKEOFF,
+               MODE_LAND: FlightMode.LAND, MODE_RTL: FlightMode.RTL}
+
+
+def mode_name(custom_mode: int) -> str:
+    main, sub = px4_main_sub(custom_mode)
+    return MODE_NAMES.get(custom_mode, f"{main}.{sub}")
+
+
+def flight_mode(custom_mode: int, armed: bool, landed: bool) -> FlightMode:
+    """SwarmBox's view of a PX4 mode: disarmed (or armed and idle on the ground) is IDLE."""
+    if not armed:
+        return FlightMode.IDLE
+    mode = _AUTO_MODES.get(custom_mode)
+    if mode is not None:
+        return mode
+    return FlightMode.IDLE if landed else FlightMode.HOLD
+
+
+# ---- SET_POSITION_TARGET_LOCAL_NED type masks ---------------------------------------------------
+_POS_IGNORE = 0b111
+_VEL_IGNORE = 0b111 << 3
+_ACC_IGNORE = 0b111 << 6
+_FORCE = mavlink.POSITION_TARGET_TYPEMASK_FORCE_SET
+_YAW_IGNORE = mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE
+_YAW_RATE_IGNORE = mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
+TYPE_MASK = {   # what each setpoint kind fills in; + _YAW_IGNORE when it carries no yaw
+    SetpointKind.POSITION: _VEL_IGNORE | _ACC_IGNORE | _YAW_RATE_IGNORE,       # 2552
+    SetpointKind.VELOCITY: _POS_IGNORE | _ACC_IGNORE | _YAW_RATE_IGNORE,       # 2503
+    SetpointKind.ACCELERATION: _POS_IGNORE | _VEL_IGNORE | _YAW_RATE_IGNORE,   # 2111
+}
+
+
+def type_mask(sp: Setpoint) -> int:
+    return TYPE_MASK[sp.kind] | (_YAW_IGNORE if sp.yaw_rad is None else 0)
+
+
+def setpoint_of_target(mask: int, pos: Vec3, vel: Vec3, acc: Vec3, yaw_rad: float) -> Setpoint | None:
+    """The setpoint a SET_POSITION_TARGET_LOCAL_NED asks for (position wins over velocity over
+    acceleration, as PX4's offboard mode ranks them); None for a mask it cannot fly (force, nothing)."""
+    yaw = None if mask & _YAW_IGNORE else float(yaw_rad)
+    if mask & _FORCE:
+        return None
+    if not mask & _POS_IGNORE:
+        return Setpoint(SetpointKind.POSITION, pos, yaw)
+    if not mask & _VEL_IGNORE:
+        return Setpoint(SetpointKind.VELOCITY, vel, yaw)
+    if not mask & _ACC_IGNORE:
+        return Setpoint(SetpointKind.ACCELERATION, acc, yaw)
+    return None
+
+
+# ---- decoded messages (SI units) ----------------------------------------------------------------
+class HeartbeatMsg(NamedTuple):
+    armed: bool
+    custom_mode: int
+    autopilot: bool          # sent by an autopilot (not a ground station or a companion)
+
+
+class LocalPositionMsg(NamedTuple):
+    time_boot_s: float
+    pos_ned_m: Vec3
+    vel_ned_m_s: Vec3
+
+
+class GlobalPositionMsg(NamedTuple):
+    time_boot_s: float
+    lat_deg: float
+    lon_deg: float
+    alt_m: float             # AMSL
+    rel_alt_m: float         # above home
+    yaw_rad: float | None
+
+
+class GnssMsg(NamedTuple):
+    time_usec: int
+    fix_type: int
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+
+
+class SysStatusMsg(NamedTuple):
+    ready_to_arm: bool
+    battery_frac: float      # NaN: unknown
+
+
+class LandedStateMsg(NamedTuple):
+    landed_state: int
+
+
+class CommandAckMsg(NamedTuple):
+    command: int
+    result: int
+    target_system: int
+
+
+class StatusTextMsg(NamedTuple):
+    severity: int
+    text: str
+
+
+class GroundTruthMsg(NamedTuple):
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+
+
+class CommandLongMsg(NamedTuple):
+    target_system: int
+    target_component: int
+    command: int
+    confirmation: int
+    params: tuple[float, ...]
+
+
+class SetpointTargetMsg(NamedTuple):
+    target_system: int
+    frame: int
+    setpoint: Setpoint | None   # in the vehicle's local frame
+
+
+def _heartbeat(m: Any) -> HeartbeatMsg:
+    autopilot = m.autopilot != mavlink.MAV_AUTOPILOT_INVALID and m.type != mavlink.MAV_TYPE_GCS
+    return HeartbeatMsg(bool(m.base_mode & ARMED_FLAG), int(m.custom_mode), autopilot)
+
+
+def _local(m: Any) -> LocalPositionMsg:
+    return LocalPositionMsg(m.time_boot_ms / 1e3, (m.x, m.y, m.z), (m.vx, m.vy, m.vz))
+
+
+def _global(m: Any) -> GlobalPositionMsg:
+    yaw = None if m.hdg == 65535 else math.remainder(math.radians(m.hdg / 100.0), 2 * math.pi)
+    return GlobalPositionMsg(m.time_boot_ms / 1e3, m.lat / 1e7, m.lon / 1e7, m.alt / 1e3,
+                             m.relative_alt / 1e3, yaw)
+
+
+def _gnss(m: Any) -> GnssMsg:
+    return GnssMsg(int(m.time_usec), int(m.fix_type), m.lat / 1e7, m.lon / 1e7, m.alt / 1e3)
+
+
+def _sys_status(m: Any) -> SysStatusMsg:
+    frac = m.battery_remaining / 100.0 if m.battery_remaining >= 0 else math.nan
+    return SysStatusMsg(bool(m.onboard_control_sensors_health & PREARM_CHECK_BIT), frac)
+
+
+def _statustext(m: Any) -> StatusTextMsg:
+    text = m.text.decode("utf-8", "replace") if isinstance(m.text, bytes) else str(m.text)
+    return StatusTextMsg(int(m.severity), text)
+
+
+def _setpoint(m: Any) -> SetpointTargetMsg:
+    sp = setpoint_of_target(m.type_mask, (m.x, m.y, m.z), (m.vx, m.vy, m.vz), (m.afx, m.afy, m.afz), m.yaw)
+    return SetpointTargetMsg(m.target_system, m.coordinate_frame, sp)
+
+
+DECODERS: dict[int, Callable[[Any], Any]] = {
+    MSG["HEARTBEAT"]: _heartbeat,
+    MSG["LOCAL_POSITION_NED"]: _local,
+    MSG["GLOBAL_POSITION_INT"]: _global,
+    MSG["GPS_RAW_INT"]: _gnss,
+    MSG["SYS_STATUS"]: _sys_status,
+    MSG["EXTENDED_SYS_STATE"]: lambda m: LandedStateMsg(int(m.landed_state)),
+    MSG["COMMAND_ACK"]: lambda m: CommandAckMsg(int(m.command), int(m.result), int(m.target_system)),
+    MSG["STATUSTEXT"]: _statustext,
+    MSG["HIL_STATE_QUATERNION"]: lambda m: GroundTruthMsg(m.lat / 1e7, m.lon / 1e7, m.alt / 1e3),
+    MSG["COMMAND_LONG"]: lambda m: CommandLongMsg(
+        m.target_system, m.target_component, m.command, m.confirmation,
+        (m.param1, m.param2, m.param3, m.param4, m.param5, m.param6, m.param7)),
+    MSG["SET_POSITION_TARGET_LOCAL_NED"]: _setpoint,
+}
+
+
+# ---- framing and decoding -----------------------------------------------------------------------
+class Packet(NamedTuple):
+    system_id: int
+    component_id: int
+    msg_id: int
+    start: int
+    end: int
+
+
+def iter_packets(data: bytes) -> Iterator[Packet | int]:
+    """Split a datagram into MAVLink packets by their headers (no CRC check).
+
+    Yields a :class:`Packet` per framed packet and an ``int`` (a count of bytes) for every run of
+    bytes that is not a packet: garbage, or a truncated packet at the end.
+    """
+    i, size = 0, len(data)
+    while i < size:
+        magic = data[i]
+        if magic == 0xFD and i + 10 <= size:
+            end = i + 12 + data[i + 1] + (13 if data[i + 2] & 1 else 0)
+            msg_id = data[i + 7] | data[i + 8] << 8 | data[i + 9] << 16
+            sysid, compid = data[i + 5], data[i + 6]
+        elif magic == 0xFE and i + 6 <= size:
+            end = i + 8 + data[i + 1]
+            msg_id, sysid, compid = data[i + 5], data[i + 3], data[i + 4]
+        else:
+            nxt = _next_magic(data, i + 1)
+            yield nxt - i
+            i = nxt
+            continue
+        if end > size:
+            yield size - i
+            return
+        yield Packet(sysid, compid, msg_id, i, end)
+        i = end
+
+
+def _next_magic(data: bytes, start: int) -> int:
+    hits = [j for j in (data.find(b"\xfd", start), data.find(b"\xfe", start)) if j >= 0]
+    return min(hits) if hits else len(data)
+
+
+class Decoder:
+    """Decodes the wanted message ids of datagrams into the named tuples above.
+
+    Counters: ``packets`` framed, ``decoded``, ``skipped`` (not wanted, never decoded; per message
+    id in ``skipped_ids``), ``garbage_bytes`` and ``bad_packets`` (framed, but the CRC or length
+    was wrong).
+    """
+
+    def __init__(self, wanted: set[int] | frozenset[int]) -> None:
+        self.wanted = set(wanted)
+        self._mav = mavlink.MAVLink(None)
+        self.packets = self.decoded = self.skipped = self.bad_packets = self.garbage_bytes = 0
+        self.skipped_ids: dict[int, int] = {}
+
+    def decode(self, data: bytes) -> Iterator[tuple[Packet, Any]]:
+        """Yield ``(packet, value)`` for every wanted, valid packet of ``data``."""
+        wanted, mav = self.wanted, self._mav
+        for item in iter_packets(data):
+            if isinstance(item, int):
+                self.garbage_bytes += item
+                continue
+            self.packets += 1
+            if item.msg_id not in wanted:
+                self.skipped += 1
+                self.skipped_ids[item.msg_id] = self.skipped_ids.get(item.msg_id, 0) + 1
+                continue
+            try:
+                msg = mav.decode(bytearray(data[item.start:item.end]))
+                value = DECODERS[item.msg_id](msg)
+            except (MAVError, KeyError, ValueError, TypeError, AttributeError):
+                self.bad_packets += 1
+                continue
+            self.decoded += 1
+            yield item, value
+
+
+# ---- ground-station side encoding ---------------------------------------------------------------
+_NAN = float("nan")
+
+
+class GcsEncoder:
+    """Packs what a ground station or companion computer sends to an autopilot."""
+
+    def __init__(self, system_id: int = 255, component_id: int = 190) -> None:
+        self.system_id = system_id
+        self._mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+
+    def _pack(self, msg: Any) -> bytes:
+        buf = msg.pack(self._mav)
+        self._mav.seq = (self._mav.seq + 1) % 256
+        return bytes(buf)
+
+    def heartbeat(self) -> bytes:
+        return self._pack(self._mav.heartbeat_encode(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID,
+                                                     0, 0, mavlink.MAV_STATE_ACTIVE))
+
+    def command(self, target: tuple[int, int], command: int, params: tuple[float, ...],
+                confirmation: int = 0) -> bytes:
+        p = (tuple(float(x) for x in params) + (0.0,) * 7)[:7]
+        msg = self._mav.command_long_encode(target[0], target[1], command, confirmation & 0xFF, *p)
+        return self._pack(msg)
+
+    def setpoint(self, target: tuple[int, int], time_boot_ms: int, sp: Setpoint) -> bytes:
+        """SET_POSITION_TARGET_LOCAL_NED for ``sp`` (already in the vehicle's local frame)."""
+        zero = (0.0, 0.0, 0.0)
+        pos = sp.ned if sp.kind is SetpointKind.POSITION else zero
+        vel = sp.ned if sp.kind is SetpointKind.VELOCITY else zero
+        acc = sp.ned if sp.kind is SetpointKind.ACCELERATION else zero
+        yaw = _NAN if sp.yaw_rad is None else sp.yaw_rad
+        return self._pack(self._mav.set_position_target_local_ned_encode(
+            time_boot_ms & 0xFFFFFFFF, target[0], target[1], FRAME_LOCAL_NED, type_mask(sp),
+            *pos, *vel, *acc, yaw, 0.0))

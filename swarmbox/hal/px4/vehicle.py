@@ -1,0 +1,387 @@
+"""One PX4 autopilot seen through its MAVLink link (the :class:`~swarmbox.hal.vehicle.Vehicle` of
+the ``px4`` bridge).
+
+Commands are COMMAND_LONGs with ack and retry (:class:`~swarmbox.hal.mavlink.link.CommandTracker`);
+an accepted command updates the state at once, the next HEARTBEAT confirms it. Setpoints pass the
+same safety monitor as the simulator's, are converted to the vehicle's local frame and streamed as
+SET_POSITION_TARGET_LOCAL_NED: a new setpoint goes out at the next service, an unchanged one is
+re-sent at ``setpoint_rate_hz``. OFFBOARD is requested only after setpoints have streamed for
+``offboard_lead_s`` (PX4 refuses it otherwise). If the autopilot leaves OFFBOARD on its own (a
+failsafe, a pilot), the bridge does not fight it: setpoints are ignored, with an event, until the
+next explicit command.
+
+Frames: every conversion goes through the vehicle's :class:`~swarmbox.hal.mavlink.frames.VehicleFrame`
+(local NED origin at its home, as PX4's EKF origin at the spawn point; GNSS and ground truth through
+the mission's geodetic origin).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from swarmbox.api import Setpoint, Telemetry
+from swarmbox.hal.mavlink.codec import (
+    CMD_ARM_DISARM,
+    CMD_LAND,
+    CMD_RTL,
+    CMD_SET_MESSAGE_INTERVAL,
+    CMD_SET_MODE,
+    CMD_TAKEOFF,
+    CUSTOM_MODE_FLAG,
+    LANDED_ON_GROUND,
+    MODE_HOLD,
+    MODE_LAND,
+    MODE_OFFBOARD,
+    MODE_RTL,
+    MODE_TAKEOFF,
+    MSG,
+    CommandAckMsg,
+    GcsEncoder,
+    GlobalPositionMsg,
+    GnssMsg,
+    GroundTruthMsg,
+    HeartbeatMsg,
+    LandedStateMsg,
+    LocalPositionMsg,
+    StatusTextMsg,
+    SysStatusMsg,
+    flight_mode,
+    mode_name,
+    px4_main_sub,
+)
+from swarmbox.hal.mavlink.frames import VehicleFrame
+from swarmbox.hal.mavlink.link import Command, CommandTracker, VehicleLink
+from swarmbox.hal.safety import SafetyLimits, check_setpoint
+
+Vec3 = tuple[float, float, float]
+#: emit(kind, name, data): an event of this vehicle, stamped by the backend.
+Emit = Callable[[str, str, dict[str, Any]], None]
+_NAN = math.nan
+_ZERO3 = (0.0, 0.0, 0.0)
+_HAS_LINK_FIELD = "link_ok" in Telemetry._fields
+WARNING_SEVERITY = 4          # STATUSTEXT at this severity or worse becomes an event
+STATE_GRACE_S = 0.3           # a HEARTBEAT this soon after an accepted command may predate it
+SILENCE_AFTER = 20            # unrequested packets of one id before asking PX4 to stop them
+WANTED = frozenset(MSG[m] for m in (
+    "HEARTBEAT", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "GPS_RAW_INT", "SYS_STATUS",
+    "EXTENDED_SYS_STATE", "COMMAND_ACK", "STATUSTEXT", "HIL_STATE_QUATERNION"))
+
+
+@dataclass(frozen=True, slots=True)
+class LinkConfig:
+    """Per-vehicle link timing (all in vehicle/run seconds, i.e. sped up with the simulation)."""
+
+    component_id: int = 1
+    link_timeout_s: float = 3.0
+    heartbeat_rate_hz: float = 1.0
+    setpoint_rate_hz: float = 20.0
+    offboard_lead_s: float = 0.5
+    command_timeout_s: float = 1.0
+    command_retries: int = 5
+    stats_every_s: float = 10.0
+    silence_unrequested: bool = True
+    message_rates_hz: tuple[tuple[str, float], ...] = ()
+
+
+class Px4Vehicle:
+    """A PX4 autopilot over MAVLink (implements :class:`swarmbox.hal.vehicle.Vehicle`)."""
+
+    def __init__(self, drone_id: int, link: VehicleLink, cfg: LinkConfig, frame: VehicleFrame,
+                 limits: SafetyLimits, emit: Emit) -> None:
+        self.drone_id, self.home_ned_m = drone_id, frame.home_ned_m
+        self._link, self._cfg, self._frame, self._limits, self._emit = link, cfg, frame, limits, emit
+        self._target = (link.system_id, cfg.component_id)
+        self._enc = GcsEncoder()
+        self._cmds = CommandTracker(self._send_command, self._command_report, cfg.command_timeout_s,
+                                    cfg.command_retries, self._command_timed_out)
+        self._on_regain: Command | None = None      # the last command lost with the link
+        self._now = 0.0
+        self.connected = self.link_lost = False
+        self._hb_s = self._gcs_hb_s = self._state_set_s = -math.inf
+        self._armed, self._mode, self._landed_state, self._ready = False, MODE_HOLD, 0, False
+        self._battery, self._yaw, self._pos_s = _NAN, 0.0, 0.0
+        self._local: Vec3 | None = None
+        self._vel: Vec3 = _ZERO3
+        self._gnss: Vec3 | None = None
+        self._true: Vec3 | None = None
+        self._gnss_seq, self._gnss_usec = 0, -1
+        self._home_alt_m: float | None = None
+        self._tel: Telemetry | None = None
+        self._sp: Setpoint | None = None          # streamed setpoint, vehicle-local frame
+        self._sp_new, self._sp_sent_s, self._offboard_try_s = False, -math.inf, -math.inf
+        self._stream_since_s: float | None = None
+        self._blocked = ""                         # why setpoints are not followed (autopilot's choice)
+        self._noted: set[tuple[str, str]] = set()
+        self._silenced: dict[int, tuple[int, float, int]] = {}   # msg id -> (tries, at_s, count then)
+        self._checks_s = self._stats_s = 0.0
+        self._bad_seen, self._foreign_seen, self._odd_acks = (0, 0), set(), set()
+        self.clock_pairs: list[tuple[float, float]] = []   # (vehicle boot s, our clock - boot) minima
+        self._handlers: dict[type, Callable[[Any], None]] = {
+            LocalPositionMsg: self._on_local, GlobalPositionMsg: self._on_global, GnssMsg: self._on_gnss,
+            SysStatusMsg: self._on_sys_status, LandedStateMsg: self._on_landed, CommandAckMsg: self._on_ack,
+            StatusTextMsg: self._on_statustext, GroundTruthMsg: self._on_truth}
+
+    @property
+    def system_id(self) -> int:
+        return self._link.system_id
+
+    @property
+    def has_position(self) -> bool:
+        return self.connected and self._local is not None
+
+    # ---- Vehicle protocol ---------------------------------------------------------------------
+    def telemetry(self) -> Telemetry:
+        return self._tel if self._tel is not None else self._build_telemetry()
+
+    def arm(self) -> None:
+        if self._armed:
+            return
+        self._blocked = ""
+        self._submit(CMD_ARM_DISARM, (1.0,), lambda: self._set_armed(True))
+
+    def disarm(self) -> None:
+        if self._armed:
+            self._submit(CMD_ARM_DISARM, (0.0,), lambda: self._set_armed(False))
+
+    def takeoff(self, alt_m: float) -> None:
+        if not (isinstance(alt_m, int | float) and math.isfinite(alt_m) and alt_m > 0):
+            self._deny("takeoff", f"bad altitude {alt_m!r}")
+            return
+        self._stop_offboard()
+        home_amsl = self._frame.home_alt_m if self._home_alt_m is None else self._home_alt_m
+        amsl = home_amsl + min(float(alt_m), self._limits.max_alt_m)
+        self._submit(CMD_TAKEOFF, (_NAN, 0.0, 0.0, _NAN, _NAN, _NAN, amsl),
+                     lambda: self._set_mode(MODE_TAKEOFF))
+
+    def setpoint(self, sp: Setpoint) -> str:
+        verdict = check_setpoint(sp, self.telemetry(), self._limits)
+        if verdict.action != "ok":
+            self._emit("safety", "setpoint_" + verdict.action,
+                       {"reason": verdict.reason, "kind": sp.kind.name.lower(),
+                        "requested": [float(x) for x in sp.ned]})
+        safe = verdict.setpoint
+        if safe is None:
+            return verdict.action
+        if not self._armed or self.link_lost or self._blocked:
+            reason = "disarmed" if not self._armed else ("link lost" if self.link_lost else self._blocked)
+            self._deny("setpoint", reason)
+            return verdict.action
+        local = self._frame.setpoint_to_local(safe)
+        if local != self._sp:
+            self._sp, self._sp_new = local, True
+        if self._stream_since_s is None:
+            self._stream_since_s = self._now
+        return verdict.action
+
+    def land(self) -> None:
+        self._stop_offboard()
+        self._submit(CMD_LAND, (0.0, 0.0, 0.0, _NAN, _NAN, _NAN, _NAN), lambda: self._set_mode(MODE_LAND))
+
+    def return_to_launch(self) -> None:
+        self._stop_offboard()
+        self._submit(CMD_RTL, (), lambda: self._set_mode(MODE_RTL))
+
+    def hold(self) -> None:
+        self._stop_offboard()
+        main, sub = px4_main_sub(MODE_HOLD)
+        self._submit(CMD_SET_MODE, (CUSTOM_MODE_FLAG, main, sub), lambda: self._set_mode(MODE_HOLD))
+
+    # ---- servicing (called by the backend every step) -----------------------------------------
+    def service(self, now_s: float) -> None:
+        """Read the link, run the watchdog, stream setpoints, retry commands."""
+        self._now = now_s
+        handlers = self._handlers
+        for comp, value in self._link.poll():
+            if type(value) is HeartbeatMsg:
+                self._on_heartbeat(comp, value)
+            else:
+                handler = handlers.get(type(value))
+                if handler is not None:
+                    handler(value)
+        if now_s - self._gcs_hb_s >= 1.0 / self._cfg.heartbeat_rate_hz:
+            self._gcs_hb_s = now_s
+            self._link.send(self._enc.heartbeat())
+        if not self.connected:
+            return
+        if not self.link_lost and now_s - self._hb_s > self._cfg.link_timeout_s:
+            self._lose_link()
+        self._stream()
+        self._cmds.service(now_s)
+        if now_s - self._checks_s >= 1.0:
+            self._checks_s = now_s
+            self._silence_unrequested()
+            self._report_link()
+
+    def _stream(self) -> None:
+        sp, now = self._sp, self._now
+        if sp is None or self.link_lost:
+            return
+        if self._sp_new or now - self._sp_sent_s >= 1.0 / self._cfg.setpoint_rate_hz:
+            self._link.send(self._enc.setpoint(self._target, int(now * 1e3), sp))
+            self._sp_sent_s, self._sp_new = now, False
+        if (self._mode != MODE_OFFBOARD and self._armed and self._stream_since_s is not None
+                and now - self._stream_since_s >= self._cfg.offboard_lead_s
+                and now - self._offboard_try_s >= 1.0 and not self._cmds.busy(CMD_SET_MODE)):
+            self._offboard_try_s = now
+            main, sub = px4_main_sub(MODE_OFFBOARD)
+            self._submit(CMD_SET_MODE, (CUSTOM_MODE_FLAG, main, sub), lambda: self._set_mode(MODE_OFFBOARD))
+
+    # ---- incoming -----------------------------------------------------------------------------
+    def _on_heartbeat(self, comp: int, hb: HeartbeatMsg) -> None:
+        if comp != self._target[1] or not hb.autopilot:
+            return
+        if not self.connected:
+            self.connected = True
+            self._emit("link", "connected", {"system_id": self.system_id, "mode": mode_name(hb.custom_mode)})
+            self._configure_rates()
+        elif self.link_lost:
+            self.link_lost = False
+            self._emit("link", "regained", {"silent_s": round(self._now - self._hb_s, 3)})
+            self._configure_rates()
+            if self._on_regain is not None:   # e.g. the failsafe's return-to-launch: send it now
+                cmd, self._on_regain = self._on_regain, None
+                self._submit(cmd.command, cmd.params, cmd.on_accepted)
+        self._hb_s = self._now
+        self._tel = None
+        if self._now - self._state_set_s < STATE_GRACE_S:
+            return   # may have been sent before the command we just saw accepted
+        if hb.armed != self._armed:
+            self._set_armed(hb.armed)
+        if hb.custom_mode != self._mode:
+            if self._sp is not None and self._mode == MODE_OFFBOARD:
+                self._stop_offboard()
+                self._blocked = f"autopilot switched to {mode_name(hb.custom_mode)}"
+                self._emit("command", "offboard_lost", {"mode": mode_name(hb.custom_mode)})
+            self._set_mode(hb.custom_mode, confirmed=True)
+
+    def _on_local(self, m: LocalPositionMsg) -> None:
+        self._local, self._vel, self._pos_s, self._tel = m.pos_ned_m, m.vel_ned_m_s, self._now, None
+        offset = self._now - m.time_boot_s
+        pairs = self.clock_pairs
+        if pairs and int(pairs[-1][0]) == int(m.time_boot_s):
+            if offset < pairs[-1][1]:
+                pairs[-1] = (m.time_boot_s, offset)
+        else:
+            pairs.append((m.time_boot_s, offset))
+
+    def _on_global(self, m: GlobalPositionMsg) -> None:
+        if m.yaw_rad is not None:
+            self._yaw = m.yaw_rad
+        self._home_alt_m = m.alt_m - m.rel_alt_m
+        self._tel = None
+
+    def _on_gnss(self, m: GnssMsg) -> None:
+        if m.fix_type >= 3 and m.time_usec != self._gnss_usec:
+            self._gnss_usec = m.time_usec
+            self._gnss = self._frame.geodetic_to_mission(m.lat_deg, m.lon_deg, m.alt_m)
+            self._gnss_seq += 1
+            self._tel = None
+
+    def _on_sys_status(self, m: SysStatusMsg) -> None:
+        self._ready, self._battery, self._tel = m.ready_to_arm, m.battery_frac, None
+
+    def _on_landed(self, m: LandedStateMsg) -> None:
+        self._landed_state, self._tel = m.landed_state, None
+
+    def _on_ack(self, m: CommandAckMsg) -> None:
+        if m.target_system in (0, self._enc.system_id):
+            self._cmds.on_ack(m, self._now)
+
+    def _on_statustext(self, m: StatusTextMsg) -> None:
+        if m.severity <= WARNING_SEVERITY:
+            self._emit("command", "statustext", {"severity": m.severity, "text": m.text})
+
+    def _on_truth(self, m: GroundTruthMsg) -> None:
+        self._true, self._tel = self._frame.geodetic_to_mission(m.lat_deg, m.lon_deg, m.alt_m), None
+
+    # ---- helpers ------------------------------------------------------------------------------
+    def _build_telemetry(self) -> Telemetry:
+        pos = self.home_ned_m if self._local is None else self._frame.to_mission(self._local)
+        landed = self._landed_state == LANDED_ON_GROUND if self._landed_state else not self._armed
+        extra = {"link_ok": not self.link_lost} if _HAS_LINK_FIELD else {}
+        self._tel = Telemetry(self._pos_s, pos, self._vel, self._yaw, self._gnss, self._gnss_seq, self._armed,
+                              landed, flight_mode(self._mode, self._armed, landed), self._battery,
+                              self._ready and not self.link_lost, self._true, **extra)
+        return self._tel
+
+    def _submit(self, command: int, params: tuple[float, ...], on_accepted: Callable[[], None] | None = None,
+                quiet: bool = False) -> None:
+        if not quiet and command != CMD_SET_MESSAGE_INTERVAL:
+            self._on_regain = None    # a newer intent replaces one lost with the link
+        self._cmds.submit(Command(command, params, quiet, on_accepted), self._now)
+
+    def _command_timed_out(self, cmd: Command) -> None:
+        if self.link_lost and not cmd.quiet and cmd.command != CMD_SET_MESSAGE_INTERVAL:
+            self._on_regain = cmd
+
+    def _send_command(self, command: int, params: tuple[float, ...], confirmation: int) -> bool:
+        return self._link.send(self._enc.command(self._target, command, params, confirmation))
+
+    def _command_report(self, name: str, data: dict[str, Any]) -> None:
+        if name != "unexpected_ack":
+            self._emit("command", name, data)
+        elif data["command"] not in self._odd_acks:
+            self._odd_acks.add(data["command"])
+            self._emit("link", name, data)
+
+    def _set_mode(self, mode: int, confirmed: bool = False) -> None:
+        if mode != self._mode:
+            self._noted.clear()
+        self._mode, self._tel = mode, None
+        if not confirmed:
+            self._state_set_s = self._now
+
+    def _set_armed(self, armed: bool) -> None:
+        self._armed, self._tel = armed, None
+        self._noted.clear()
+        self._state_set_s = self._now
+        if not armed:
+            self._stop_offboard()
+
+    def _stop_offboard(self) -> None:
+        self._sp, self._stream_since_s, self._blocked = None, None, ""
+
+    def _deny(self, cmd: str, reason: str) -> None:
+        if (cmd, reason) not in self._noted:
+            self._noted.add((cmd, reason))
+            name = "setpoint_ignored" if cmd == "setpoint" else cmd + "_denied"
+            self._emit("command", name, {"reason": reason})
+
+    def _lose_link(self) -> None:
+        self.link_lost, self._tel = True, None
+        self._emit("link", "lost", {"silent_s": round(self._now - self._hb_s, 3),
+                                    "mode": mode_name(self._mode), "armed": self._armed})
+
+    def _configure_rates(self) -> None:
+        for name, hz in self._cfg.message_rates_hz:
+            interval_us = 1e6 / hz if hz > 0 else -1.0
+            self._submit(CMD_SET_MESSAGE_INTERVAL, (float(MSG[name]), interval_us))
+
+    def _silence_unrequested(self) -> None:
+        """Ask the autopilot to stop streams nobody asked for (each costs parsing time)."""
+        if not self._cfg.silence_unrequested:
+            return
+        for msg_id, count in self._link.decoder.skipped_ids.items():
+            if count < SILENCE_AFTER:
+                continue
+            tries, at_s, then = self._silenced.get(msg_id, (0, -math.inf, 0))
+            if tries < 3 and self._now - at_s >= 5.0 and count - then >= SILENCE_AFTER:
+                self._silenced[msg_id] = (tries + 1, self._now, count)
+                self._submit(CMD_SET_MESSAGE_INTERVAL, (float(msg_id), -1.0), quiet=True)
+
+    def _report_link(self) -> None:
+        dec, st = self._link.decoder, self._link.stats
+        bad = (dec.garbage_bytes, dec.bad_packets)
+        if bad != self._bad_seen:
+            self._emit("link", "garbage", {"garbage_bytes": bad[0] - self._bad_seen[0],
+                                           "bad_packets": bad[1] - self._bad_seen[1]})
+            self._bad_seen = bad
+        for sysid in st.foreign.keys() - self._foreign_seen:
+            self._foreign_seen.add(sysid)
+            self._emit("link", "foreign_system", {"system_id": sysid, "packets": st.foreign[sysid]})
+        if self._now - self._stats_s >= self._cfg.stats_every_s:
+            self._stats_s = self._now
+            self._emit("link", "stats", st.as_dict(dec))

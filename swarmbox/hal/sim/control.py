@@ -1,0 +1,219 @@
+"""A PX4-like cascaded multicopter controller, vectorized over a fleet.
+
+position P → velocity setpoint (saturated horizontally and vertically) → velocity PID with PX4's
+anti-reset windup → acceleration setpoint (saturated by the acceleration and tilt limits). One
+addition to PX4's loop: a feed-forward of the airframe's linear drag at the velocity setpoint (PX4's
+integrator has to learn it), so the vehicle settles on a saturated velocity setpoint without
+overshooting the speed limits. Every kind
+of target is one column of the same arrays, so one :meth:`CascadedController.update` serves the whole
+fleet with no per-drone Python:
+
+- a position target has position gains ``kp`` and no feed-forward;
+- a velocity target has ``kp = 0`` and the velocity as feed-forward (it bypasses the position loop);
+- an acceleration target has zero velocity-loop gains and the acceleration as feed-forward (it
+  bypasses both loops);
+- "thrust off" (disarmed, crashed) feeds gravity forward with the loops off: the vehicle falls.
+
+Accelerations are *commanded* accelerations relative to hover (NED, down positive): the vehicle
+compensates gravity itself, so 0 means "hover".
+
+Layout: every array is axis-first, ``(3, N)`` (rows n, e, d) or ``(N,)``, so each row is contiguous
+and the hot loop is made of same-shape ufunc calls (broadcasting costs more than the arithmetic at
+fleet sizes of a few drones).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from swarmbox.hal.sim.params import GRAVITY_M_S2, SimParams
+
+
+class CascadedController:
+    """Targets, integrators and limits of N vehicles; :meth:`update` computes their accelerations.
+
+    Per-drone columns are written by the ``set_*`` methods (on commands, not every tick).
+    """
+
+    def __init__(self, n: int, p: SimParams) -> None:
+        self.p = p
+        col = lambda *v: np.array(v, dtype=float)[:, None] * np.ones(n)  # noqa: E731  (3, N) constant
+        self._kp_pos = np.array([p.mpc_xy_p, p.mpc_xy_p, p.mpc_z_p])
+        self._kp_vel = col(p.mpc_xy_vel_p_acc, p.mpc_xy_vel_p_acc, p.mpc_z_vel_p_acc)
+        self._ki_vel = col(p.mpc_xy_vel_i_acc, p.mpc_xy_vel_i_acc, p.mpc_z_vel_i_acc)
+        self._kd_vel = col(p.mpc_xy_vel_d_acc, p.mpc_xy_vel_d_acc, p.mpc_z_vel_d_acc)
+        self._arw_gain = 2.0 / np.maximum(self._kp_vel, 1e-6)   # PX4: 2 / kP, horizontal only
+        self._arw_gain[2] = 0.0
+        self._ah_max = np.full(n, p.acc_hor_limit_m_s2)
+        self._neg_up_max = np.full(n, -p.mpc_acc_up_max_m_s2)
+        self._tiny = np.full(n, 1e-9)
+        z3 = lambda: np.zeros((3, n))  # noqa: E731
+        self.tgt_pos_ned_m, self.vel_ff_ned_m_s, self.acc_ff_ned_m_s2 = z3(), z3(), z3()
+        self.kp, self.loop_on = z3(), np.zeros(n)       # position gains; velocity loop on (1) / off (0)
+        self.vmax_h_m_s = np.full(n, p.mpc_xy_vel_max_m_s)
+        self.vmin_d_m_s = np.full(n, -p.mpc_z_vel_max_up_m_s)   # most negative vertical velocity (up)
+        self.vmax_d_m_s = np.full(n, p.mpc_z_vel_max_dn_m_s)
+        self.amax_d_m_s2 = np.full(n, p.mpc_acc_down_max_m_s2)  # gravity for thrust-off columns
+        self.integ_m_s2, self._prev_vel = z3(), z3()
+        self.yaw_rad, self.yaw_tgt_rad = np.zeros(n), np.zeros(n)
+        self._yaw_busy = False
+        self.acc_ned_m_s2 = z3()
+        self._vsp, self._tmp, self._h, self._lim_h, self._lim_up = z3(), z3(), *(np.zeros(n) for _ in "abc")
+        self._dt_s = -1.0
+        self._kp_v, self._ki_dt_v, self._kd_dt_v = z3(), z3(), z3()   # gains × loop_on (× dt terms)
+        self._drag_v = z3()                                           # drag / mass × loop_on
+        # row views, made once: slicing costs as much as a small ufunc
+        self._vsp_rows, self._acc_rows = tuple(self._vsp), tuple(self.acc_ned_m_s2)
+        self.set_thrust_off(slice(None))
+
+    # ---- per-drone commands -------------------------------------------------------------------
+    def set_position(self, i: int, pos_ned_m: Sequence[float], vmax_h_m_s: float | None = None,
+                     vmax_up_m_s: float | None = None, hold_d: bool = True) -> None:
+        """Fly to ``pos_ned_m``; ``hold_d`` False leaves the vertical axis to the feed-forward."""
+        p = self.p
+        self.tgt_pos_ned_m[:, i] = pos_ned_m
+        self.kp[:, i] = self._kp_pos if hold_d else (p.mpc_xy_p, p.mpc_xy_p, 0.0)
+        self.vel_ff_ned_m_s[:, i] = 0.0
+        self._loop(i, True)
+        self.vmax_h_m_s[i] = p.mpc_xy_vel_max_m_s if vmax_h_m_s is None else vmax_h_m_s
+        self.vmin_d_m_s[i] = -(p.mpc_z_vel_max_up_m_s if vmax_up_m_s is None else vmax_up_m_s)
+        self.vmax_d_m_s[i] = p.mpc_z_vel_max_dn_m_s
+
+    def set_descent(self, i: int, n_m: float, e_m: float, speed_m_s: float) -> None:
+        """Hold (n, e) and sink at ``speed_m_s`` (LAND)."""
+        self.set_position(i, (n_m, e_m, 0.0), hold_d=False)
+        self.vel_ff_ned_m_s[:, i] = (0.0, 0.0, speed_m_s)
+
+    def set_velocity(self, i: int, vel_ned_m_s: Sequence[float]) -> None:
+        """Follow a velocity (feed-forward, position loop bypassed)."""
+        self.set_position(i, (0.0, 0.0, 0.0))
+        self.kp[:, i] = 0.0
+        self.vel_ff_ned_m_s[:, i] = vel_ned_m_s
+
+    def set_acceleration(self, i: int, acc_ned_m_s2: Sequence[float]) -> None:
+        """Command an acceleration directly (both loops bypassed)."""
+        self.kp[:, i] = 0.0
+        self.vel_ff_ned_m_s[:, i] = 0.0
+        self._loop(i, False)
+        self.acc_ff_ned_m_s2[:, i] = acc_ned_m_s2
+
+    def set_thrust_off(self, i: int | slice) -> None:
+        """Motors off: no control, the vehicle falls (or rests on the ground)."""
+        self.kp[:, i] = 0.0
+        self.vel_ff_ned_m_s[:, i] = 0.0
+        self._loop(i, False)
+        self.acc_ff_ned_m_s2[2, i] = GRAVITY_M_S2
+        self.amax_d_m_s2[i] = GRAVITY_M_S2
+
+    def reset_integrator(self, i: int) -> None:
+        self.integ_m_s2[:, i] = 0.0
+
+    def set_yaw_target(self, i: int, yaw_rad: float | None) -> None:
+        """Turn toward ``yaw_rad`` at the yaw-rate limit; None keeps the current heading."""
+        tgt = self.yaw_rad[i] if yaw_rad is None else yaw_rad
+        self.yaw_tgt_rad[i] = tgt
+        if tgt != self.yaw_rad[i]:
+            self._yaw_busy = True
+
+    def _loop(self, i: int | slice, on: bool) -> None:
+        self.loop_on[i] = 1.0 if on else 0.0
+        self.acc_ff_ned_m_s2[:, i] = 0.0
+        self.amax_d_m_s2[i] = self.p.mpc_acc_down_max_m_s2
+        if not on:
+            self.integ_m_s2[:, i] = 0.0
+        self._dt_s = -1.0   # refresh the per-column gains on the next update
+
+    # ---- the fleet-wide update ----------------------------------------------------------------
+    def _refresh_gains(self, dt_s: float) -> None:
+        self._dt_s = dt_s
+        np.multiply(self._kp_vel, self.loop_on, out=self._kp_v)
+        np.multiply(self.p.drag_n_s_m / self.p.mass_kg, self.loop_on, out=self._drag_v)
+        np.multiply(self._ki_vel * dt_s, self.loop_on, out=self._ki_dt_v)
+        np.multiply(self._kd_vel / dt_s, self.loop_on, out=self._kd_dt_v)
+
+    def update(self, pos_ned_m: np.ndarray, vel_ned_m_s: np.ndarray, accel_scale: np.ndarray,
+               dt_s: float) -> np.ndarray:
+        """Acceleration setpoints (3, N) for the estimated states (3, N); the array is reused.
+
+        ``accel_scale`` (N,) multiplies the horizontal and upward acceleration limits (motor loss).
+        """
+        if dt_s != self._dt_s:
+            self._refresh_gains(dt_s)
+        self._velocity_setpoint(pos_ned_m)
+        self._velocity_pid(vel_ned_m_s)
+        self._limit_and_integrate(accel_scale)
+        if self._yaw_busy:
+            self._turn(dt_s)
+        return self.acc_ned_m_s2
+
+    def _velocity_setpoint(self, pos_ned_m: np.ndarray) -> None:
+        """Position P + velocity feed-forward, saturated horizontally and vertically, into _vsp."""
+        vsp, tmp = self._vsp, self._tmp
+        vn, ve, vd = self._vsp_rows
+        np.subtract(self.tgt_pos_ned_m, pos_ned_m, out=tmp)
+        np.multiply(tmp, self.kp, out=vsp)
+        vsp += self.vel_ff_ned_m_s
+        _saturate_h(vn, ve, self.vmax_h_m_s, self._h)
+        np.maximum(vd, self.vmin_d_m_s, out=vd)
+        np.minimum(vd, self.vmax_d_m_s, out=vd)
+
+    def _velocity_pid(self, vel_ned_m_s: np.ndarray) -> None:
+        """Drag feed-forward + velocity PID (derivative on the measurement, as PX4) into acc.
+
+        Leaves the velocity error in _vsp and the unsaturated acceleration in _tmp.
+        """
+        vsp, tmp, acc = self._vsp, self._tmp, self.acc_ned_m_s2
+        np.multiply(vsp, self._drag_v, out=acc)
+        np.subtract(vsp, vel_ned_m_s, out=vsp)
+        np.multiply(vsp, self._kp_v, out=tmp)
+        acc += tmp
+        acc += self.integ_m_s2
+        np.subtract(vel_ned_m_s, self._prev_vel, out=tmp)
+        tmp *= self._kd_dt_v
+        acc -= tmp
+        np.copyto(self._prev_vel, vel_ned_m_s)
+        acc += self.acc_ff_ned_m_s2
+        np.copyto(tmp, acc)
+
+    def _limit_and_integrate(self, accel_scale: np.ndarray) -> None:
+        """Acceleration and tilt limits (scaled by motor health), then the integrator update.
+
+        PX4's anti-reset windup: horizontally, the integrated error loses what the saturation cut
+        (times 2/kP); vertically, integration stops while the acceleration is saturated.
+        """
+        vsp, tmp, acc, h = self._vsp, self._tmp, self.acc_ned_m_s2, self._h
+        an, ae, ad = self._acc_rows
+        np.multiply(accel_scale, self._ah_max, out=self._lim_h)
+        np.maximum(self._lim_h, self._tiny, out=self._lim_h)
+        _saturate_h(an, ae, self._lim_h, h)
+        np.multiply(accel_scale, self._neg_up_max, out=self._lim_up)
+        np.maximum(ad, self._lim_up, out=ad)
+        np.minimum(ad, self.amax_d_m_s2, out=ad)
+        np.equal(tmp[2], ad, out=h)
+        tmp -= acc
+        tmp *= self._arw_gain
+        vsp -= tmp
+        np.multiply(self._vsp_rows[2], h, out=self._vsp_rows[2])
+        vsp *= self._ki_dt_v
+        self.integ_m_s2 += vsp
+
+    def _turn(self, dt_s: float) -> None:
+        err = self.yaw_tgt_rad - self.yaw_rad
+        err = (err + math.pi) % (2 * math.pi) - math.pi
+        step = math.radians(self.p.mpc_yawrauto_max_deg_s) * dt_s
+        np.clip(err, -step, step, out=err)
+        self.yaw_rad += err
+        self.yaw_rad[:] = (self.yaw_rad + math.pi) % (2 * math.pi) - math.pi
+        self._yaw_busy = bool(np.any(np.abs(err) >= step))
+
+
+def _saturate_h(x_n: np.ndarray, x_e: np.ndarray, vmax: np.ndarray, h: np.ndarray) -> None:
+    """Scale the horizontal vectors (x_n, x_e) (N,) to a norm of at most ``vmax`` (> 0), in place."""
+    np.hypot(x_n, x_e, out=h)
+    np.maximum(h, vmax, out=h)
+    np.divide(vmax, h, out=h)
+    x_n *= h
+    x_e *= h

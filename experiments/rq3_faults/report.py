@@ -31,10 +31,14 @@ UNITS = {"gps_drift": "m/s", "gps_bias": "m", "gps_noise": "x sigma", "latency":
          "burst_loss": "p_enter"}
 
 
-def default_rows(rows: pd.DataFrame) -> pd.DataFrame:
+def is_default_setting(rows: pd.DataFrame) -> pd.Series:
     """The default detector's rows and the baseline's."""
     sb = (rows["detector"] == "swarmbox") & (rows["rule"] == "tukey") & (rows["threshold_scale"] == 1.0)
-    return rows[sb | (rows["detector"] == "baseline")]
+    return sb | (rows["detector"] == "baseline")
+
+
+def default_rows(rows: pd.DataFrame) -> pd.DataFrame:
+    return rows[is_default_setting(rows)]
 
 
 def _mean(values: pd.Series) -> float:
@@ -46,9 +50,11 @@ def summarize(rows: pd.DataFrame) -> pd.DataFrame:
     """Per fault, magnitude and detector: runs, target detected, first alarm on the target, means over
     the detected runs of t_f, tau_d and Sigma_a, and the mean measured excess."""
     out = []
-    for (fault, mag, detector), g in default_rows(rows).groupby(["fault", "magnitude", "detector"], sort=True):
+    groups = default_rows(rows).groupby(["fault", "magnitude", "detector"], sort=True)
+    for (fault, mag, detector), g in groups:
         hit = g[g["detected"].astype(bool)]
-        out.append({"fault": fault, "magnitude": mag, "detector": detector, "runs": len(g), "detected": len(hit),
+        out.append({"fault": fault, "magnitude": mag, "detector": detector, "runs": len(g),
+                    "detected": len(hit),
                     "localized": int(g["localized"].astype(bool).sum()), "t_f_s": _mean(hit["t_f_s"]),
                     "tau_d": _mean(hit["tau_d"]), "sigma_a": _mean(hit["sigma_a"]),
                     "measured": _mean(g["measured"]) if "measured" in g else np.nan,
@@ -84,18 +90,41 @@ def network_table(summary: pd.DataFrame, fault: str) -> pd.DataFrame:
              "Sigma_a": lambda r: _cell(r, "sigma_a"),
              f"measured excess ({unit})": lambda r: f"{r['measured'] * k:.2f}",
              "first alarm on target": lambda r: f"{r['localized']}/{r['runs']}"}
-    return pd.DataFrame([{"metric": name, **{f"{r['magnitude'] * k:g}{label}": fn(r) for _, r in part.iterrows()}}
+    return pd.DataFrame([{"metric": name, **{f"{r['magnitude'] * k:g}{label}": fn(r)
+                                             for _, r in part.iterrows()}}
                          for name, fn in lines.items()])
 
 
-def rq3_report(rows: pd.DataFrame, out: Path) -> list[Path]:
+def timeline_figures(root: Path, out: Path) -> list[Path]:
+    """Per fault, the run of the middle magnitude on drone 4: what the analyzer saw, with the
+    injected fault drawn as a separate ground-truth overlay."""
+    from swarmbox.analysis import diagnosis as dg
+    from swarmbox.analysis import diagnosis_plots, figures, scoring
+    from swarmbox.analysis.load import load_run
+    from swarmbox.analysis.unify import unify
+
+    written = []
+    for kind in ("drift", "latency", "loss"):
+        run_dir = root / kind / "m2_t4"
+        if not (run_dir / "run.json").exists():
+            continue
+        run = load_run(run_dir)
+        unify(run)
+        series = dg.drone_series(run)
+        truth = scoring.ground_truth(run.tables["events"])[0]
+        fig = diagnosis_plots.timeline(series, dg.scan(series), truth=truth)
+        written += figures.save(fig, out / "figures", f"rq3_timeline_{truth.name}", formats=("png",))
+    return written
+
+
+def rq3_report(rows: pd.DataFrame, out: Path, root: Path) -> list[Path]:
     summary = summarize(rows)
     written = write_table(rows, out, "rq3_runs", markdown=False) + write_table(summary, out, "rq3_summary")
     for name, table in (("rq3_table2", table2(summary)), ("rq3_table4", network_table(summary, "latency")),
                         ("rq3_table5", network_table(summary, "packet_loss"))):
         written += write_table(table, out, name)
         print(f"## {name}\n\n{to_markdown(table)}")
-    return written
+    return written + timeline_figures(root, out)
 
 
 def acceptance_table(smallest: pd.DataFrame) -> pd.DataFrame:
@@ -104,12 +133,13 @@ def acceptance_table(smallest: pd.DataFrame) -> pd.DataFrame:
     view = smallest.copy()
     view["smallest_magnitude"] = [f"{m:g} {UNITS.get(f, '')}" if np.isfinite(m) else "none of the swept"
                                   for m, f in zip(view["smallest_magnitude"], view["fault"], strict=True)]
-    cols = ["fault", "detector", "n_drones", "network", "smallest_magnitude", "detection_rate", "localization",
-            "t_f_median_s", "rule", "threshold_scale", "fa_per_drone_h", "healthy_drone_h", "runs_per_magnitude"]
+    cols = ["fault", "detector", "n_drones", "network", "smallest_magnitude", "detection_rate",
+            "localization", "t_f_median_s", "rule", "threshold_scale", "fa_per_drone_h", "healthy_drone_h",
+            "runs_per_magnitude"]
     return view[cols].sort_values(["fault", "detector", "n_drones", "network"]).reset_index(drop=True)
 
 
-def bench_report(rows: pd.DataFrame, out: Path) -> list[Path]:
+def bench_report(rows: pd.DataFrame, out: Path, root: Path) -> list[Path]:
     from swarmbox.analysis import diagnosis_plots, figures
 
     fa = detection.false_alarm_rates(rows)
@@ -117,11 +147,16 @@ def bench_report(rows: pd.DataFrame, out: Path) -> list[Path]:
     det = detection.detection_rates(rows)
     smallest = detection.smallest_detected(det, fa)
     written = write_table(rows, out, "bench_runs", markdown=False)
-    written += write_table(fa, out, "false_alarms") + write_table(fa_healthy, out, "false_alarms_healthy_runs")
+    written += write_table(fa, out, "false_alarms")
+    written += write_table(fa_healthy, out, "false_alarms_healthy_runs")
     written += write_table(det, out, "detection_rates")
     accept = acceptance_table(smallest)
     written += write_table(accept, out, "smallest_detected")
-    default = det[((det["rule"] == "tukey") & (det["threshold_scale"] == 1.0)) | (det["detector"] == "baseline")]
+    is_default = is_default_setting(rows)
+    fixed = detection.smallest_detected(detection.detection_rates(rows[is_default]),
+                                        detection.false_alarm_rates(rows[is_default]), max_fa=np.inf)
+    written += write_table(acceptance_table(fixed), out, "smallest_detected_default")
+    default = det[is_default_setting(det)]
     written += figures.save(diagnosis_plots.detection_curves(default, units=UNITS), out, "detection_rate",
                             formats=("png",))
     written += figures.save(diagnosis_plots.roc_curves(detection.roc(rows)), out, "roc", formats=("png",))
@@ -145,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = rows.assign(run=[str(Path(r).relative_to(args.root.resolve()) if Path(r).is_absolute() else
                                 Path(r).relative_to(args.root)) for r in rows["run"]])
     rows = rows.sort_values(["run", "detector", "rule", "threshold_scale"]).reset_index(drop=True)
-    written = (rq3_report if args.which == "rq3" else bench_report)(rows, args.out)
+    written = (rq3_report if args.which == "rq3" else bench_report)(rows, args.out, args.root)
     print(f"{rows['run'].nunique()} runs, {len(written)} files written under {args.out}")
     return 0
 

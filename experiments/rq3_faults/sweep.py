@@ -40,7 +40,8 @@ BENCH_WINDOW = ("fault.onset_s=12.0", "fault.duration_s=15.0")
 #: With 36 drones (eight times the simulation and analysis per run) the sweep keeps the paper's
 #: three faults and the magnitudes around the 9-drone noise floor.
 MAGNITUDES_36 = {"gps_drift": (0.5, 1.0, 2.0), "latency": (1.0, 2.0, 5.0), "packet_loss": (0.05, 0.1, 0.2)}
-NETWORKS = {"ideal": ("network=ideal", "network.latency_ms=1.0", "network.jitter_ms=1.0"), "wifi": ("network=wifi",)}
+NETWORKS = {"ideal": ("network=ideal", "network.latency_ms=1.0", "network.jitter_ms=1.0"),
+            "wifi": ("network=wifi",)}
 SIZES = {9: "mission=formation9", 36: "mission=formation36"}
 RQ3 = {"drift": ("gps_drift", "fault.rate_m_s", (1.0, 2.0, 3.0, 4.0, 5.0)),
        "latency": ("latency", "fault.latency_ms", (5.0, 10.0, 15.0, 20.0, 25.0)),
@@ -54,7 +55,8 @@ def execute(run_dir: Path, overrides: list[str]) -> None:
     from omegaconf import OmegaConf, open_dict
 
     from swarmbox.run.config import register
-    from swarmbox.run.runner import execute as run, run_choices
+    from swarmbox.run.runner import execute as run
+    from swarmbox.run.runner import run_choices
 
     register()
     GlobalHydra.instance().clear()
@@ -76,9 +78,9 @@ def rq3_plan() -> list[tuple[str, list[str]]]:
     for kind, (model, key, values) in RQ3.items():
         for i, v in enumerate(values):
             for target in range(9):
-                plan.append((f"{kind}/m{i}_t{target}", ["+experiment=rq3_bench", f"fault={model}", f"{key}={v}",
-                                                        f"fault.targets=[{target}]", *WINDOW, *NETWORKS["ideal"], SIZES[9],
-                                                        "seed=0"]))
+                plan.append((f"{kind}/m{i}_t{target}",
+                             ["+experiment=rq3_bench", f"fault={model}", f"{key}={v}",
+                              f"fault.targets=[{target}]", *WINDOW, *NETWORKS["ideal"], SIZES[9], "seed=0"]))
     return plan
 
 
@@ -100,8 +102,8 @@ def bench_plan(reps: dict[int, int], healthy: dict[int, int], seed: int = 17) ->
                     for r in range(reps[n]):
                         target = int(rng.integers(n))
                         plan.append((r, f"n{n}/{net}/{model}/m{i}_r{r}",
-                                     [*common, f"fault={model}", f"{key}={_value(v)}", f"fault.targets=[{target}]",
-                                      *BENCH_WINDOW, f"seed={r}"]))
+                                     [*common, f"fault={model}", f"{key}={_value(v)}",
+                                      f"fault.targets=[{target}]", *BENCH_WINDOW, f"seed={r}"]))
     return [(name, overrides) for _, name, overrides in sorted(plan, key=lambda p: p[0])]
 
 
@@ -140,11 +142,17 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     from joblib import Parallel, delayed
 
-    plan = rq3_plan() if args.which == "rq3" else bench_plan(dict(zip(SIZES, args.reps)), dict(zip(SIZES, args.healthy)))
+    if args.which == "rq3":
+        plan = rq3_plan()
+    else:
+        reps = dict(zip(SIZES, args.reps, strict=True))
+        plan = bench_plan(reps, dict(zip(SIZES, args.healthy, strict=True)))
     args.out.mkdir(parents=True, exist_ok=True)
-    pd.DataFrame([{"run": n, "overrides": " ".join(o)} for n, o in plan]).to_csv(args.out / "plan.csv", index=False)
+    listing = pd.DataFrame([{"run": n, "overrides": " ".join(o)} for n, o in plan])
+    listing.to_csv(args.out / "plan.csv", index=False)
     start = time.time()
-    for line in Parallel(n_jobs=args.jobs, return_as="generator")(delayed(run_one)(args.out, n, o) for n, o in plan):
+    jobs = (delayed(run_one)(args.out, n, o) for n, o in plan)
+    for line in Parallel(n_jobs=args.jobs, return_as="generator")(jobs):
         print(f"[{time.time() - start:7.1f}s] {line}", flush=True)
     print(f"{len(plan)} runs in {time.time() - start:.0f} s wall", flush=True)
     return 0

@@ -21,8 +21,8 @@ from swarmbox.analysis.load import load_run
 from swarmbox.analysis.unify import T, unify
 
 #: The parameter that is each fault model's magnitude.
-MAGNITUDE = {"gps_drift": "rate_m_s", "gps_bias": "bias_ned_m", "gps_noise": "noise_scale", "latency": "latency_ms",
-             "packet_loss": "loss_prob", "burst_loss": "p_enter_burst"}
+MAGNITUDE = {"gps_drift": "rate_m_s", "gps_bias": "bias_ned_m", "gps_noise": "noise_scale",
+             "latency": "latency_ms", "packet_loss": "loss_prob", "burst_loss": "p_enter_burst"}
 SETTING = ["detector", "rule", "threshold_scale", "persist_ticks"]
 
 
@@ -76,13 +76,15 @@ def evaluate_run(run_dir: str | Path, settings: Sequence[dg.DiagnosisOptions],
             "target": truth.target if truth else None, "onset_u": truth.onset_u if truth else np.nan,
             "scan_s": span[1] - span[0]}
     if truth is not None and truth.name in ("latency", "packet_loss", "burst_loss"):
-        base["measured"] = scoring.measured_excess(network.message_flow(run.tables["messages"]), run.drones, truth)
+        flow = network.message_flow(run.tables["messages"])
+        base["measured"] = scoring.measured_excess(flow, run.drones, truth)
     rows = []
     for opts in settings:
         alarms = dg.scan(series, opts)
         first = dg.finding(alarms)
-        rows.append({**base, "detector": "swarmbox", "rule": opts.rule, "threshold_scale": opts.threshold_scale,
-                     "persist_ticks": opts.persist_ticks, "alarms": len(alarms),
+        rows.append({**base, "detector": "swarmbox", "rule": opts.rule,
+                     "threshold_scale": opts.threshold_scale, "persist_ticks": opts.persist_ticks,
+                     "alarms": len(alarms),
                      "first_alarm_drone": first.get("drone"), "first_alarm_metric": first.get("metric"),
                      **scoring.score_alarms(alarms, truth, span, n, grace_s)})
     resets = baseline_alarms(dg.estimator_alarms(run, span), series, settings[0])
@@ -117,7 +119,8 @@ def detection_rates(rows: pd.DataFrame, by: Sequence[str] = ("n_drones", "networ
         tf = hit["t_f_s"].to_numpy(dtype="float64")
         sig = hit["sigma_a"].to_numpy(dtype="float64")
         out.append({**dict(zip(keys, key, strict=True)), "runs": len(g), "detected": len(hit),
-                    "detection_rate": len(hit) / len(g), "localization": float(g["localized"].astype(bool).mean()),
+                    "detection_rate": len(hit) / len(g),
+                    "localization": float(g["localized"].astype(bool).mean()),
                     "t_f_median_s": float(np.median(tf)) if tf.size else np.nan,
                     "t_f_p90_s": float(np.quantile(tf, 0.9)) if tf.size else np.nan,
                     "tau_d_mean": float(hit["tau_d"].mean()) if len(hit) else np.nan,
@@ -158,7 +161,8 @@ def roc(rows: pd.DataFrame, by: Sequence[str] = ("fault", "magnitude")) -> pd.Da
     """Detection rate against false alarms per drone-hour over the threshold settings, per ``by``."""
     fa = false_alarm_rates(rows, by=())
     det = detection_rates(rows, by=())
-    det = det.groupby([*SETTING, *by], dropna=False).agg(runs=("runs", "sum"), detected=("detected", "sum")).reset_index()
+    det = det.groupby([*SETTING, *by], dropna=False).agg(runs=("runs", "sum"), detected=("detected", "sum"))
+    det = det.reset_index()
     det["detection_rate"] = det["detected"] / det["runs"]
     return det.merge(fa[[*SETTING, "fa_per_drone_h"]], on=SETTING, how="left")
 
@@ -205,8 +209,9 @@ def write_report(rows: pd.DataFrame, out: Path) -> list[Path]:
         det = detection_rates(rows)
         written += write_table(det, out, "detection_rates")
         written += write_table(smallest_detected(det, fa), out, "smallest_detected")
-        written += figures.save(diagnosis_plots.detection_curves(det[det["rule"] != "paper"].pipe(
-            lambda d: d[(d["threshold_scale"] == 1.0) | (d["detector"] == "baseline")])), out, "detection_rate")
+        chosen = (det["threshold_scale"] == 1.0) | (det["detector"] == "baseline")
+        default = det[(det["rule"] != "paper") & chosen]
+        written += figures.save(diagnosis_plots.detection_curves(default), out, "detection_rate")
         written += figures.save(diagnosis_plots.roc_curves(roc(rows)), out, "roc")
     return written
 
@@ -216,8 +221,8 @@ def main(argv: list[str] | None = None) -> int:
     import sys
 
     p = argparse.ArgumentParser(prog="python -m swarmbox.analysis.detection",
-                                description="Onset-agnostic diagnosis of every run below the given directories, "
-                                            "scored against any injected faults.")
+                                description="Onset-agnostic diagnosis of every run below the given "
+                                            "directories, scored against any injected faults.")
     p.add_argument("paths", nargs="+", type=Path, help="sweep or run directories (searched recursively)")
     p.add_argument("--out", type=Path, help="output directory (default: <first path>/diagnosis)")
     p.add_argument("--jobs", type=int, default=2, help="parallel analysis jobs (2)")

@@ -93,7 +93,9 @@ class Series:
             t, d = np.nonzero(np.isfinite(mat))
             parts.append(pd.DataFrame({T: self.ticks[t] * self.tick_s, "drone": np.asarray(self.drones)[d],
                                        "metric": metric, "value": mat[t, d]}))
-        return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=[T, "drone", "metric", "value"])
+        if not parts:
+            return pd.DataFrame(columns=[T, "drone", "metric", "value"])
+        return pd.concat(parts, ignore_index=True)
 
 
 def nearest_tick(t_u: np.ndarray | pd.Series, tick_s: float) -> np.ndarray:
@@ -113,7 +115,8 @@ def scan_span(run: RunData, stage: str = "EXECUTION") -> tuple[float, float]:
     return start, end
 
 
-def _matrix(frame: pd.DataFrame, col: str, ticks: np.ndarray, drones: list[int], how: str = "mean") -> np.ndarray:
+def _matrix(frame: pd.DataFrame, col: str, ticks: np.ndarray, drones: list[int],
+            how: str = "mean") -> np.ndarray:
     out = np.full((len(ticks), len(drones)), np.nan)
     if frame.empty:
         return out
@@ -121,7 +124,8 @@ def _matrix(frame: pd.DataFrame, col: str, ticks: np.ndarray, drones: list[int],
     t_idx = np.searchsorted(ticks, grouped.index.get_level_values(0).to_numpy())
     d_pos = {d: i for i, d in enumerate(drones)}
     d_idx = np.array([d_pos[d] for d in grouped.index.get_level_values(1)], dtype="int64")
-    keep = (t_idx < len(ticks)) & (ticks[np.minimum(t_idx, len(ticks) - 1)] == grouped.index.get_level_values(0))
+    at = grouped.index.get_level_values(0)
+    keep = (t_idx < len(ticks)) & (ticks[np.minimum(t_idx, len(ticks) - 1)] == at)
     out[t_idx[keep], d_idx[keep]] = grouped.to_numpy()[keep]
     return out
 
@@ -154,7 +158,8 @@ def _loss(flow: pd.DataFrame, ticks: np.ndarray, drones: list[int], opts: Diagno
     counted = flow[flow["counted"]].assign(tick=lambda f: nearest_tick(f["t_send"], opts.tick_s))
     counted = counted[(counted["tick"] >= lo) & (counted["tick"] <= ticks[-1])]
     n = np.nan_to_num(_matrix(counted.assign(one=1.0), "one", grid, drones, "sum"))
-    lost = np.nan_to_num(_matrix(counted.assign(l=counted["lost"].astype("float64")), "l", grid, drones, "sum"))
+    lost = counted.assign(lost_f=counted["lost"].astype("float64"))
+    lost = np.nan_to_num(_matrix(lost, "lost_f", grid, drones, "sum"))
     cn, cl = np.cumsum(n, axis=0), np.cumsum(lost, axis=0)
     sel = np.arange(width, len(grid))
     wn, wl = cn[sel] - cn[sel - width], cl[sel] - cl[sel - width]
@@ -201,7 +206,8 @@ def outlier_matrix(mat: np.ndarray, threshold: float, rule: str = "tukey", min_n
         gate = np.abs(rows - m[:, None]) >= threshold
     flagged = (beyond > 0) & gate & np.isfinite(rows)
     with np.errstate(invalid="ignore", divide="ignore"):
-        s = np.where(spread[:, None] > _IQR_EPS, beyond / np.where(spread > _IQR_EPS, spread, 1.0)[:, None], np.inf)
+        safe = np.where(spread > _IQR_EPS, spread, 1.0)[:, None]
+        s = np.where(spread[:, None] > _IQR_EPS, beyond / safe, np.inf)
     score[enough] = np.where(flagged, s, np.nan)
     med[enough], iqr[enough] = m, spread
     return score, med, iqr
@@ -212,7 +218,8 @@ def _episodes(flags: np.ndarray, persist: int) -> list[tuple[int, int]]:
     padded = np.concatenate([[False], flags, [False]]).astype("int8")
     edges = np.diff(padded)
     starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    return [(int(a) + persist - 1, int(b) - 1) for a, b in zip(starts, stops, strict=True) if b - a >= persist]
+    return [(int(a) + persist - 1, int(b) - 1)
+            for a, b in zip(starts, stops, strict=True) if b - a >= persist]
 
 
 def scan(series: Series, opts: DiagnosisOptions | None = None) -> pd.DataFrame:
@@ -225,7 +232,8 @@ def scan(series: Series, opts: DiagnosisOptions | None = None) -> pd.DataFrame:
             continue
         score, med, iqr = outlier_matrix(mat, opts.threshold(metric), opts.rule, opts.min_n)
         for j, drone in enumerate(series.drones):
-            for first, last in _episodes(np.isfinite(score[:, j]) | np.isinf(score[:, j]), opts.persist_ticks):
+            flagged = ~np.isnan(score[:, j])
+            for first, last in _episodes(flagged, opts.persist_ticks):
                 rows.append({T: series.ticks[first] * series.tick_s, "metric": metric, "drone": int(drone),
                              "value": float(mat[first, j]), "score": float(score[first, j]),
                              "median": float(med[first]), "iqr": float(iqr[first]),
@@ -256,5 +264,6 @@ def estimator_alarms(run: RunData, span: tuple[float, float]) -> pd.DataFrame:
     ev = run.tables["events"]
     resets = ev[(ev["kind"] == "estimator") & (ev["name"] == "position_reset") & ev["node"].isin(run.drones)
                 & (ev[T] >= span[0]) & (ev[T] <= span[1])].sort_values([T, "node"])
-    return pd.DataFrame({T: resets[T].to_numpy(dtype="float64"), "drone": resets["node"].astype("int64").to_numpy(),
+    return pd.DataFrame({T: resets[T].to_numpy(dtype="float64"),
+                         "drone": resets["node"].astype("int64").to_numpy(),
                          "tick": resets["tick"].astype("int64").to_numpy()})

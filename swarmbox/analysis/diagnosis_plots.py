@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
+from matplotlib.ticker import NullFormatter
 
 from swarmbox.analysis.diagnosis import Series
 from swarmbox.analysis.scoring import Truth
@@ -80,10 +81,14 @@ def detection_curves(det: pd.DataFrame, *, units: dict[str, str] | None = None) 
             for detector, style in (("swarmbox", "-"), ("baseline", "--")):
                 d = g[g["detector"] == detector].sort_values("magnitude")
                 if len(d) and (detector == "swarmbox" or d["detection_rate"].gt(0).any()):
-                    ax.plot(d["magnitude"], d["detection_rate"], style, marker="o", ms=3, color=f"C{i}",
+                    ax.plot(d["magnitude"], d["detection_rate"], style, marker="osD^"[i % 4], ms=4,
+                            color=f"C{i}", alpha=0.8,
                             label=f"{n} drones, {net}" + (" (baseline)" if detector == "baseline" else ""))
         ax.axhline(0.9, color="0.5", lw=0.6, ls=":")
         ax.set_xscale("log")
+        mags = sorted(part["magnitude"].dropna().unique())
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_xticks(mags, [f"{m:g}" for m in mags])
         ax.set_ylim(-0.03, 1.03)
         ax.set_title(fault)
         ax.set_xlabel(f"magnitude ({(units or {}).get(fault, '')})")
@@ -109,6 +114,7 @@ def roc_curves(curves: pd.DataFrame) -> Figure:
             ax.scatter(paper["fa_per_drone_h"], paper["detection_rate"], marker="x", color=f"C{i}")
         ax.axvline(1.0, color="0.5", lw=0.6, ls=":")
         ax.set_xscale("symlog", linthresh=0.1)
+        ax.set_xlim(left=0.0)
         ax.set_ylim(-0.03, 1.03)
         ax.set_title(fault)
         ax.set_xlabel("false alarms per drone-hour")

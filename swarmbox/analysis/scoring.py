@@ -135,8 +135,9 @@ def score_alarms(alarms: pd.DataFrame, truth: Truth | None, span: tuple[float, f
     end = truth.end_u if truth.end_u is not None else span[1]
     during = alarms[(alarms[T] >= truth.onset_u) & (alarms[T] <= end)]
     mine = during[during["drone"] == truth.target]
-    row |= {"detected": bool(len(mine)), "localized": bool(len(during)) and int(during.iloc[0]["drone"]) == truth.target,
-            "first_drone": int(during.iloc[0]["drone"]) if len(during) else None,
+    first_drone = int(during.iloc[0]["drone"]) if len(during) else None
+    row |= {"detected": bool(len(mine)), "localized": first_drone is not None and first_drone == truth.target,
+            "first_drone": first_drone,
             "first_metric": str(during.iloc[0]["metric"]) if len(during) else None}
     if len(mine):
         first = mine.iloc[0]
@@ -147,7 +148,8 @@ def score_alarms(alarms: pd.DataFrame, truth: Truth | None, span: tuple[float, f
 
 def measured_excess(flow: pd.DataFrame, drones: list[int], truth: Truth) -> float:
     """Target's latency (ms) or loss ratio over the fault window minus the median of the other drones'."""
-    col = {"latency": "latency_ms_mean", "packet_loss": "loss_ratio", "burst_loss": "loss_ratio"}.get(truth.name)
+    cols = {"latency": "latency_ms_mean", "packet_loss": "loss_ratio", "burst_loss": "loss_ratio"}
+    col = cols.get(truth.name)
     if col is None or truth.target is None or truth.end_u is None:
         return np.nan
     window = network.between(flow, truth.onset_u, truth.end_u)

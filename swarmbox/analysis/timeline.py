@@ -3,7 +3,8 @@
 Windows tile the unified clock: window k is [k*w, (k+1)*w) and is stamped with its end, (k+1)*w, the
 first moment its value is known. Samples are stamped on ticks and the estimated clock offsets are off by
 microseconds, so a sample up to half a tick (12.5 ms) before a window's start counts in that window:
-without that tolerance a tick sample landing a microsecond early would fall into the previous window. Monitored metrics, per drone and window:
+without that tolerance a tick sample landing a microsecond early would fall into the previous window.
+Monitored metrics, per drone and window:
 
 - ``latency_ms``: mean latency of the delivered messages the drone sent or that were sent to it,
   binned by send time;

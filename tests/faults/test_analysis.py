@@ -79,8 +79,8 @@ def test_drift_diagnosis_survives_shifting_a_node_clock(run, tmp_path):
 
 @pytest.mark.slow
 def test_latency_and_loss_are_found_and_recovered(run):
-    _, d = run(*HOVER, "fault=[latency,packet_loss]", "fault.latency.latency_ms=15", "fault.packet_loss.loss_prob=0.4",
-               *WINDOW)
+    _, d = run(*HOVER, "fault=[latency,packet_loss]", "fault.latency.latency_ms=15",
+               "fault.packet_loss.loss_prob=0.4", *WINDOW)
     alarms = blind_diagnosis(d)
     assert set(alarms[alarms["drone"] == 2]["metric"]) >= {"latency_ms", "loss_ratio"}
     assert set(alarms["drone"]) == {2}

@@ -151,11 +151,14 @@ def drone_series(run: RunData, opts: DiagnosisOptions | None = None,
 
 
 def _loss(flow: pd.DataFrame, ticks: np.ndarray, drones: list[int], opts: DiagnosisOptions) -> np.ndarray:
-    """Trailing-window loss ratio per tick: cumulative sums of lost and counted by send tick."""
+    """Trailing-window loss ratio per tick: cumulative sums of lost and counted by send tick. A
+    window is only full once the run has sent messages for its whole length: before that (the
+    first seconds of a run) the ratio of a few dozen messages is noise, and is left out."""
     width = int(round(opts.loss_window_s / opts.tick_s))
     lo = ticks[0] - width
     grid = np.arange(lo, ticks[-1] + 1)
     counted = flow[flow["counted"]].assign(tick=lambda f: nearest_tick(f["t_send"], opts.tick_s))
+    first = int(counted["tick"].min()) if len(counted) else int(ticks[-1]) + 1
     counted = counted[(counted["tick"] >= lo) & (counted["tick"] <= ticks[-1])]
     n = np.nan_to_num(_matrix(counted.assign(one=1.0), "one", grid, drones, "sum"))
     lost = counted.assign(lost_f=counted["lost"].astype("float64"))
@@ -163,8 +166,9 @@ def _loss(flow: pd.DataFrame, ticks: np.ndarray, drones: list[int], opts: Diagno
     cn, cl = np.cumsum(n, axis=0), np.cumsum(lost, axis=0)
     sel = np.arange(width, len(grid))
     wn, wl = cn[sel] - cn[sel - width], cl[sel] - cl[sel - width]
+    full = (ticks >= first + width - 1)[:, None]
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(wn > 0, wl / np.where(wn > 0, wn, 1.0), np.nan)
+        return np.where((wn > 0) & full, wl / np.where(wn > 0, wn, 1.0), np.nan)
 
 
 def _row_quantiles(rows: np.ndarray, qs: tuple[float, ...]) -> list[np.ndarray]:

@@ -11,7 +11,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
-from swarmbox.analysis import anomaly, diagnosis_plots, scoring
+from swarmbox.analysis import anomaly, detection, diagnosis_plots, scoring
 from swarmbox.analysis import diagnosis as dg
 from swarmbox.analysis.load import load_run
 from swarmbox.analysis.unify import T, unify
@@ -118,6 +118,12 @@ def test_analyzer_output_does_not_depend_on_the_fault_events(make_run, tmp_path)
     pd.testing.assert_frame_equal(series_f.tidy(), series_b.tidy())
     blind_figure = diagnosis_plots.timeline(series_b, alarms_b)
     assert _png(diagnosis_plots.timeline(series_f, alarms_f)) == _png(blind_figure)
+    analyzer_columns = ["detector", "rule", "threshold_scale", "alarms", "first_alarm_drone",
+                        "first_alarm_metric", "scan_s", "n_drones"]
+    rows_f, rows_b = (detection.evaluate_run(d, [dg.DiagnosisOptions()]) for d in (full, blind))
+    pd.testing.assert_frame_equal(rows_f[analyzer_columns], rows_b[analyzer_columns])
+    assert rows_f.loc[0, "detected"] and rows_f.loc[0, "fault"] == "gps_drift"
+    assert rows_b.loc[0, "fault"] == "none"
     (truth,) = scoring.ground_truth(run_f.tables["events"])
     overlay = diagnosis_plots.timeline(series_f, alarms_f, truth=truth)
     extra = [a for a in overlay.axes[0].get_children() if a.get_gid() == diagnosis_plots.TRUTH_GID]

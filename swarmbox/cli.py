@@ -12,6 +12,7 @@ Each subcommand imports only what it needs: ``swarmbox run`` never loads the ana
 
 from __future__ import annotations
 
+import os
 import sys
 
 USAGE = """usage: swarmbox {run,analyze,compare} [ARGS...]
@@ -27,6 +28,10 @@ def _run(argv: list[str]) -> int:
     from swarmbox.run.__main__ import main as run_main
 
     sys.argv = ["swarmbox run", *argv]   # Hydra reads its arguments from sys.argv
+    # As with `python -m`, the current directory is importable: a user project's algorithms
+    # (_target_: my_lab.flock.FlockDrone) load from where the command runs.
+    if os.getcwd() not in sys.path:
+        sys.path.insert(0, os.getcwd())
     run_main()
     return 0
 

@@ -138,6 +138,11 @@ class SweepProgress(Callback):
         self.interval_s = interval_s
         self.monitor: SweepMonitor | None = None
 
+    def __getstate__(self) -> dict[str, Any]:
+        # Remote launchers (Ray) pickle Hydra's callbacks along with each job; the monitor (a
+        # thread and a stream) stays with the process that started the sweep.
+        return {"interval_s": self.interval_s, "monitor": None}
+
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
         sweep_dir = Path(str(config.hydra.sweep.dir))
         sweep_dir.mkdir(parents=True, exist_ok=True)

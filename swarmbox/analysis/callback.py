@@ -22,6 +22,7 @@ from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
 from swarmbox.analysis.outputs import write_sweep
+from swarmbox.analysis.parallel import Reporter
 from swarmbox.analysis.sweep import SweepOptions, analyze_sweep
 
 log = logging.getLogger(__name__)
@@ -38,7 +39,7 @@ class AnalyzeSweepCallback(Callback):
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         try:
             sweep_dir = Path(str(config.hydra.sweep.dir))
-            result = analyze_sweep(sweep_dir, self.options)
+            result = analyze_sweep(sweep_dir, self.options, progress=Reporter("sweep analysis"))
             write_sweep(result, sweep_dir, with_figures=self.figures)
             for row in result.problems.itertuples(index=False):
                 log.warning("%s: %s: %s", row.severity, row.run, row.problem)

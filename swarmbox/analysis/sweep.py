@@ -29,6 +29,7 @@ import itertools
 import logging
 import warnings
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,6 +39,7 @@ from scipy import stats
 
 from swarmbox.analysis.catalog import MACHINE_METRICS, Direction, direction_of, unit_of
 from swarmbox.analysis.load import RunLoadError, find_runs, load_run
+from swarmbox.analysis.parallel import map_runs
 from swarmbox.analysis.report import AnalysisOptions, analyze_run
 
 log = logging.getLogger(__name__)
@@ -72,33 +74,48 @@ class SweepResult:
         return metric_columns(self.runs, self.choice_columns)
 
 
-def collect_runs(root: Path, opts: AnalysisOptions) -> tuple[pd.DataFrame, pd.DataFrame, dict, list[str]]:
-    """Analyze every run below ``root``: (runs table, problems table, declared directions, choice columns)."""
+def _analyze_one(run_dir: Path, root: Path, opts: AnalysisOptions) -> dict:
+    """One run's table row, problems, declared directions and choice names (runs in a worker)."""
+    rel = str(run_dir.relative_to(root)) if run_dir != root else "."
+    out: dict = {"row": None, "problems": [], "directions": {}, "choices": []}
+    try:
+        run = load_run(run_dir)
+    except RunLoadError as exc:
+        out["problems"].append({"run": rel, "severity": "skipped", "problem": str(exc)})
+        return out
+    notes = [{"run": rel, "severity": "warning", "problem": p} for p in run.problems]
+    skip = _skip_reason(run)
+    if skip:
+        out["problems"] += [{"run": rel, "severity": "skipped", "problem": skip}, *notes]
+        return out
+    try:
+        analysis = analyze_run(run, opts)
+    except Exception as exc:  # noqa: BLE001 - one bad run must not stop the sweep
+        log.exception("analysis of %s failed", run_dir)
+        out["problems"].append({"run": rel, "severity": "skipped", "problem": f"analysis failed: {exc!r}"})
+        return out
+    out["problems"] += [{"run": rel, "severity": "warning", "problem": p} for p in analysis.problems]
+    run_choices = {str(k): str(v) for k, v in (run.manifest.get("choices") or {}).items()}
+    out.update(choices=list(run_choices), directions=dict(analysis.directions),
+               row={"run": rel, "status": run.status, "seed": run.manifest.get("seed"),
+                    **run_choices, **analysis.scalars})
+    return out
+
+
+def collect_runs(root: Path, opts: AnalysisOptions, workers: int | None = None,
+                 progress: Callable[[int, int], None] | None = None,
+                 ) -> tuple[pd.DataFrame, pd.DataFrame, dict, list[str]]:
+    """Analyze every run below ``root`` (in parallel: ``workers`` processes, default one per core).
+
+    Returns (runs table, problems table, declared directions, choice columns), in the runs' order.
+    """
     rows, problems, directions, choices = [], [], {}, []
-    for run_dir in find_runs(root):
-        rel = str(run_dir.relative_to(root)) if run_dir != root else "."
-        try:
-            run = load_run(run_dir)
-        except RunLoadError as exc:
-            problems.append({"run": rel, "severity": "skipped", "problem": str(exc)})
-            continue
-        notes = [{"run": rel, "severity": "warning", "problem": p} for p in run.problems]
-        skip = _skip_reason(run)
-        if skip:
-            problems += [{"run": rel, "severity": "skipped", "problem": skip}, *notes]
-            continue
-        try:
-            analysis = analyze_run(run, opts)
-        except Exception as exc:  # noqa: BLE001 - one bad run must not stop the sweep
-            log.exception("analysis of %s failed", run_dir)
-            problems.append({"run": rel, "severity": "skipped", "problem": f"analysis failed: {exc!r}"})
-            continue
-        problems += [{"run": rel, "severity": "warning", "problem": p} for p in analysis.problems]
-        run_choices = {str(k): str(v) for k, v in (run.manifest.get("choices") or {}).items()}
-        choices += [c for c in run_choices if c not in choices]
-        directions |= analysis.directions
-        rows.append({"run": rel, "status": run.status, "seed": run.manifest.get("seed"),
-                     **run_choices, **analysis.scalars})
+    for one in map_runs(_analyze_one, find_runs(root), root, opts, workers=workers, progress=progress):
+        problems += one["problems"]
+        directions |= one["directions"]
+        choices += [c for c in one["choices"] if c not in choices]
+        if one["row"] is not None:
+            rows.append(one["row"])
     runs = pd.DataFrame(rows)
     return runs, pd.DataFrame(problems, columns=["run", "severity", "problem"]), directions, choices
 
@@ -257,10 +274,11 @@ def ranks(summary: pd.DataFrame, group_by: tuple[str, ...]) -> pd.DataFrame:
     return wide.sort_values("mean_rank", kind="stable").reset_index()
 
 
-def analyze_sweep(root: str | Path, opts: SweepOptions | None = None) -> SweepResult:
-    """Analyze every run below ``root`` and build the benchmark tables."""
+def analyze_sweep(root: str | Path, opts: SweepOptions | None = None, workers: int | None = None,
+                  progress: Callable[[int, int], None] | None = None) -> SweepResult:
+    """Analyze every run below ``root`` (``workers`` processes; ``progress(done, total)``) and tabulate."""
     opts = opts or SweepOptions()
-    runs, problems, directions, choice_columns = collect_runs(Path(root), opts.run)
+    runs, problems, directions, choice_columns = collect_runs(Path(root), opts.run, workers, progress)
     missing = [g for g in opts.group_by if g not in runs.columns]
     if runs.empty or missing:
         if missing and not runs.empty:

@@ -5,3 +5,14 @@ over MAVLink; analyse the per-node logs with :mod:`swarmbox.analysis`.
 """
 
 __version__ = "0.1.0"
+
+
+def load(path, tables=None):
+    """A run's or a sweep's logs as tidy DataFrames: ``swarmbox.load("results/sweeps/<sweep>").state``.
+
+    Every row carries ``run``, ``algo``, ``mission``, ``seed`` and ``node``; ``.runs`` lists the runs.
+    See :mod:`swarmbox.analysis.tidy`. pandas is imported only when this is called.
+    """
+    from swarmbox.analysis.tidy import load as _load
+
+    return _load(path, tables)

@@ -46,6 +46,7 @@ def test_one_run_and_a_subset_of_tables(sweep):
 
 
 def test_import_swarmbox_stays_light():
-    code = "import sys, swarmbox; print(sorted(m for m in ('pandas', 'matplotlib', 'scipy') if m in sys.modules))"
+    code = ("import sys, swarmbox; "
+            "print(sorted(m for m in ('pandas', 'matplotlib', 'scipy') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"

@@ -176,6 +176,7 @@ def vehicle():
         assert proc.returncode == 0, err.decode()
 
 
+@pytest.mark.slow
 def test_vehicle_speaks_px4(vehicle):
     gcs = vehicle
     first = gcs.collect(2.0)

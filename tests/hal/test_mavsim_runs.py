@@ -14,10 +14,13 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from scipy.spatial import cKDTree
 
 from swarmbox.hal.mavlink import codec as mc
 from tests.conftest import table
+
+pytestmark = pytest.mark.slow   # whole missions in wall-clock time
 
 ROOT = Path(__file__).resolve().parents[2]
 FAST = ("run.speed=4",)

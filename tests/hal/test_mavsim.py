@@ -181,7 +181,7 @@ def vehicle():
 @pytest.mark.slow
 def test_vehicle_speaks_px4(vehicle):
     gcs = vehicle
-    first = gcs.collect(2.0)
+    first = gcs.collect(2.0 * 4 / VEHICLE_SPEED)      # 2 s at speed 4: the same simulated time
     assert first, "no traffic from mavsim"
     assert {p.system_id for p, _ in first} == {3} and {p.component_id for p, _ in first} == {1}
     hb = [v for _, v in first if isinstance(v, mc.HeartbeatMsg)]

@@ -72,7 +72,7 @@ def test_ray_launcher_gives_the_same_tables_as_joblib(tmp_path):
 
 @pytest.mark.slow
 def test_submitit_local_executor_flies_the_sweep(tmp_path):
-    pytest.importorskip("hydra_plugins.hydra_submitit_launcher", reason="pip install -e '.[slurm]' (CI installs it)")
+    pytest.importorskip("hydra_plugins.hydra_submitit_launcher", reason="pip install -e '.[slurm]' (CI has it)")
     proc = swarmbox_run("-m", *HOVER, "seed=0,1", "hydra/launcher=submitit_local",
                         "hydra.launcher.timeout_min=10", f"hydra.sweep.dir={tmp_path / 'sub'}",
                         "~hydra.callbacks.analyze")

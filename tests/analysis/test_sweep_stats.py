@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 from scipy import stats
 
@@ -55,3 +56,14 @@ def test_ci_is_scipys_bca_bootstrap():
                           random_state=sweep._rng(0, "g", "m")).confidence_interval
     assert (lo, hi) == pytest.approx((ref.low, ref.high))
     assert lo < values.mean() < hi
+
+
+@pytest.mark.slow
+def test_parallel_analysis_gives_the_same_tables_and_reports_progress(sweep_dir):
+    seen = []
+    serial = analyze_sweep(sweep_dir, SweepOptions(n_boot=200), workers=1)
+    parallel = analyze_sweep(sweep_dir, SweepOptions(n_boot=200), workers=2,
+                             progress=lambda done, total: seen.append((done, total)))
+    assert seen[-1] == (10, 10) and [d for d, _ in seen] == list(range(1, 11))
+    for name in ("runs", "summary", "paired", "ranks"):
+        pd.testing.assert_frame_equal(getattr(serial, name), getattr(parallel, name))

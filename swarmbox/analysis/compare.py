@@ -34,7 +34,8 @@ import yaml
 
 from swarmbox.analysis.catalog import Direction, direction_of
 
-STAT_COLUMNS = {"metric", "n", "mean", "value", "median", "std", "ci_low", "ci_high", "direction", "unit"}
+STAT_COLUMNS = {"metric", "n", "mean", "value", "median", "std", "ci_low", "ci_high", "direction", "unit",
+                "note", "kind"}   # note, kind: the sweep summary's annotations (CI withheld, machine figure)
 REGRESSIONS = {"worse", "missing", "nan"}
 
 

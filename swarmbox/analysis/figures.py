@@ -84,6 +84,11 @@ def heatmap(summary: pd.DataFrame, *, group_by: tuple[str, ...] = ("algo",), met
     gap, means = gaps(summary, group_by, metrics)
     gap, means = gap.T, means.T
     fig, ax = _axes(ax, (3.5 + 1.3 * max(len(gap.columns), 1), 1.5 + 0.45 * max(len(gap), 1)))
+    if gap.empty:
+        ax.text(0.5, 0.5, "no metric with a direction in two or more groups: nothing to compare",
+                ha="center", va="center", wrap=True)
+        ax.set_axis_off()
+        return fig
     cells = means.map(lambda v: "" if pd.isna(v) else f"{v:.3g}")
     vmax = float(np.clip(np.nanmax(gap.to_numpy(dtype="float64"), initial=0.0), 0.1, 1.0))
     sns.heatmap(100 * gap.astype("float64"), ax=ax, cmap="OrRd", vmin=0, vmax=100 * vmax,

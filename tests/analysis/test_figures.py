@@ -107,3 +107,8 @@ def test_boxplots_one_panel_per_varying_metric_with_units():
     assert [t.get_text() for t in visible[0].get_xticklabels()] == ["a\n(n=3)", "b\n(n=3)"]
     assert not visible[0].patches                                    # n = 3: no quartile box
     assert "collision_events = 0" in fig.get_suptitle()
+
+
+def test_heatmap_with_a_single_group_says_there_is_nothing_to_compare():
+    fig = figures.heatmap(SUMMARY[SUMMARY["algo"] == "a"].assign(n=5))
+    assert "nothing to compare" in fig.axes[0].texts[0].get_text()

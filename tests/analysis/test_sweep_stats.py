@@ -39,8 +39,8 @@ def test_pairs_only_where_seeds_pair(small_sweep):
     assert "no test" in p["note"]
 
 
-def test_machine_figures_are_reported_but_never_ranked_or_compared(sweep_dir):
-    res = analyze_sweep(sweep_dir, SweepOptions(n_boot=200))
+def test_machine_figures_are_reported_but_never_ranked_or_compared(small_sweep):
+    res = small_sweep
     machine = res.summary[res.summary["metric"].isin(sweep.MACHINE_METRICS)]
     assert len(machine) and set(machine["kind"]) == {"machine"} and set(machine["direction"]) == {""}
     assert not set(sweep.MACHINE_METRICS) & set(res.ranks.columns)

@@ -13,11 +13,12 @@ from swarmbox.testing.backend_suite import (
     check_nonfinite_setpoint_refused,
     check_protocol,
     check_return_to_launch,
+    check_setpoint_verdicts,
     run_backend_suite,
 )
 
 __all__ = [
     "BACKEND_CHECKS", "BackendFactory", "Flight", "check_disarmed_setpoint_ignored", "check_hold_stops",
     "check_mission_cycle", "check_nonfinite_setpoint_refused", "check_protocol", "check_return_to_launch",
-    "run_backend_suite",
+    "check_setpoint_verdicts", "run_backend_suite",
 ]

@@ -66,3 +66,23 @@ class HoverHere(DroneAlgorithm):
 
     def exec_complete(self, ctx):
         return ctx.stage_time_s > 2.0
+
+
+class BadSetpointDrone(DroneAlgorithm):
+    """Hovers above home, but at fixed ticks asks for a NaN, a 1.5 km jump and a point 600 m out."""
+
+    def exec_loop(self, ctx):
+        n, e, _ = ctx.home_ned_m
+        k = ctx.tick
+        if k == 40:
+            return Setpoint.position(float("nan"), e, -2.0)
+        if k == 41:
+            return Setpoint.position(n + 1500.0, e, -2.0)
+        if k == 42:
+            return Setpoint.position(n, e + 600.0, -2.0)
+        if k == 43:
+            return Setpoint.position(n, e, -300.0)
+        return Setpoint.position(n, e, -2.0)
+
+    def exec_complete(self, ctx):
+        return ctx.stage_time_s > 2.0

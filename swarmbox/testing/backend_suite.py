@@ -266,7 +266,7 @@ def check_setpoint_verdicts(factory: BackendFactory, tick_s: float = 0.025) -> N
                  (Setpoint.velocity(0.0, 100.0, 0.0), "clamped", "norm")]
         for sp, action, reason in cases:
             verdict = v.setpoint(sp)
-            assert isinstance(verdict, SetpointVerdict), f"setpoint returned {verdict!r}, not a SetpointVerdict"
+            assert isinstance(verdict, SetpointVerdict), f"setpoint returned {verdict!r}, not a verdict"
             assert verdict.action == action and reason in verdict.reason, (sp, verdict)
             assert (verdict.flown is None) == (action == "refused"), verdict
             f.run_for(tick_s, lambda: v.setpoint(hold))

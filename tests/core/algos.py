@@ -86,3 +86,22 @@ class BadSetpointDrone(DroneAlgorithm):
 
     def exec_complete(self, ctx):
         return ctx.stage_time_s > 2.0
+
+
+class TwoSuccessorsDrone(HoverHere):
+    """Drone 0 advertises two fallback superiors, 3 then 1, to its inferiors."""
+
+    def successors(self, ctx):
+        return (3, 1) if ctx.id == 0 else (ctx.superior,)
+
+    def exec_complete(self, ctx):
+        return ctx.stage_time_s > 8.0
+
+
+class ProximityDrone(HoverHere):
+    """Marks, once a second in EXECUTION, which drones the ground reported close to it."""
+
+    def exec_loop(self, ctx):
+        if ctx.tick % 40 == 0:
+            ctx.mark("near", ids=sorted(d.drone_id for d in ctx.proximity))
+        return super().exec_loop(ctx)

@@ -23,8 +23,8 @@ def test_handover_walks_the_successor_list_in_order_skipping_the_silent(run):
     def remove(swarm):
         swarm.schedule(8.0, lambda s: (s.remove_agent(0), s.remove_agent(3)))
 
-    manifest, d = run("algo=hover", "mission=hover", "algo.drone._target_=tests.core.algos.TwoSuccessorsDrone",
-                      "topology=explicit", "topology.superiors={0:-1,1:-1,2:0,3:-1}", prepare=remove)
+    manifest, d = run("algo=hover", "mission=hover",
+                      "algo.drone._target_=tests.core.algos.TwoSuccessorsDrone", "topology=explicit", "topology.superiors={0:-1,1:-1,2:0,3:-1}", prepare=remove)
     assert manifest["status"] == "ok", manifest["reason"]
     assert handovers(d, 2) == [(0, 3), (3, 1)]
     assert list(table(d, "drone_2", "stages")["stage"])[-1] == Stage.TERMINATION
@@ -39,7 +39,8 @@ def test_min_alive_aborts_the_mission_with_the_reason(run):
 
 
 def test_min_alive_is_not_triggered_while_enough_drones_remain(run):
-    manifest, _ = run(*HOVER, "run.min_alive=3", prepare=lambda s: s.schedule(6.0, lambda sw: sw.remove_agent(2)))
+    manifest, _ = run(*HOVER, "run.min_alive=3",
+                      prepare=lambda s: s.schedule(6.0, lambda sw: sw.remove_agent(2)))
     assert manifest["status"] == "ok" and "lost drones [2]" in manifest["reason"]
 
 
@@ -47,7 +48,8 @@ def test_icebreak_waits_for_the_whole_swarm(run):
     """One drone never joins: the ground must not start with 3 of 4, and says so when it times out."""
     manifest, d = run(*HOVER, "run.timeouts_s.ICEBREAK=2", prepare=lambda s: s.remove_agent(1))
     assert manifest["status"] == "aborted"
-    assert "ICEBREAK timed out after 2 s" in manifest["reason"] and "3 of 4 drones joined" in manifest["reason"]
+    assert "ICEBREAK timed out after 2 s" in manifest["reason"]
+    assert "3 of 4 drones joined" in manifest["reason"]
     assert list(table(d, "ground", "stages")["stage"]) == [Stage.ICEBREAK, Stage.ABORT]
     for i in (0, 2, 3):
         assert Stage.PREPARATION not in set(table(d, f"drone_{i}", "stages")["stage"])

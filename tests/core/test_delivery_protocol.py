@@ -73,7 +73,7 @@ def _simulate(n, send_ticks, drop, delay, cut, stage_lag):
     for tick in range(3000):
         sender_stage = 2 + sum(tick >= t for t in (send_ticks[len(send_ticks) // 2],))
         receiver_stage = 2 + sum(tick >= t + stage_lag for t in (send_ticks[len(send_ticks) // 2],))
-        for when, kind, payload in sorted(c for c in channel if c[0] == tick):
+        for _, kind, payload in sorted(c for c in channel if c[0] == tick):
             if kind == "cmd":
                 transmit(tick, "ack", payload.seq)
                 if win.accept(payload, tick):

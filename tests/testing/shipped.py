@@ -73,5 +73,5 @@ def small(algo: str) -> tuple[list[str], Callable[[DictConfig], None] | None]:
     """Overrides and a config edit that fly ``algo`` on a small mission."""
     overrides, edit = SMALL.get(algo, DELIVERY if algo.startswith("delivery") else (None, None))
     if overrides is None:
-        raise KeyError(f"no small mission for the shipped algorithm '{algo}': add one to tests/testing/shipped.py")
+        raise KeyError(f"no small mission for the shipped algorithm '{algo}' in tests/testing/shipped.py")
     return [f"algo={algo}", *overrides], edit

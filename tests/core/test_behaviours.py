@@ -24,7 +24,8 @@ def test_handover_walks_the_successor_list_in_order_skipping_the_silent(run):
         swarm.schedule(8.0, lambda s: (s.remove_agent(0), s.remove_agent(3)))
 
     manifest, d = run("algo=hover", "mission=hover",
-                      "algo.drone._target_=tests.core.algos.TwoSuccessorsDrone", "topology=explicit", "topology.superiors={0:-1,1:-1,2:0,3:-1}", prepare=remove)
+                      "algo.drone._target_=tests.core.algos.TwoSuccessorsDrone", "topology=explicit",
+                      "topology.superiors={0:-1,1:-1,2:0,3:-1}", prepare=remove)
     assert manifest["status"] == "ok", manifest["reason"]
     assert handovers(d, 2) == [(0, 3), (3, 1)]
     assert list(table(d, "drone_2", "stages")["stage"])[-1] == Stage.TERMINATION

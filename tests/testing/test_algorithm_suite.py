@@ -41,3 +41,12 @@ def test_a_timeout_abort_passes_when_the_caller_accepts_aborts(tmp_path):
 def test_every_shipped_algorithm_conforms(tmp_path, algo):
     overrides, edit = small(algo)
     check_algorithm(overrides, workdir=tmp_path, edit=edit)
+
+
+@pytest.mark.slow
+def test_the_worked_example_of_the_docs_conforms(tmp_path):
+    report = check_algorithm(["algo=hover", "mission=hover", "algo.name=shuttle",
+                              "algo.drone._target_=tests.testing.shuttle.ShuttleDrone",
+                              "+algo.ground._target_=tests.testing.shuttle.ShuttleGround",
+                              "~algo.params.hover_s", "+algo.params.spacing_m=6"], workdir=tmp_path)
+    assert [m["status"] for m in report.manifests] == ["ok", "ok"]

@@ -41,9 +41,11 @@ from swarmbox.api.types import (
     Vec3,
     wrap_angle,
 )
+from swarmbox.area import Area, mission_area, mission_grid  # the mission-area helper, for algorithms
 
 __all__ = [
-    "DescendantState", "DroneAlgorithm", "DroneContext", "DroneState", "FlightMode", "GroundAlgorithm",
-    "GroundContext", "InferiorReport", "MissionInfo", "PeerState", "Setpoint", "SetpointKind",
-    "SetpointVerdict", "Stage", "Task", "Telemetry", "Vec3", "wrap_angle",
+    "Area", "DescendantState", "DroneAlgorithm", "DroneContext", "DroneState", "FlightMode",
+    "GroundAlgorithm", "GroundContext", "InferiorReport", "MissionInfo", "PeerState", "Setpoint",
+    "SetpointKind", "SetpointVerdict", "Stage", "Task", "Telemetry", "Vec3", "mission_area",
+    "mission_grid", "wrap_angle",
 ]

@@ -15,9 +15,8 @@ import numpy as np
 from swarmbox.api.types import DescendantState, InferiorReport, MissionInfo, Stage
 from swarmbox.core.clock import NodeClock, TimeSource
 from swarmbox.core.delivery import Outbox
-from swarmbox.core.messages import Report, TaskAck, TaskCommand, make_msg_id
+from swarmbox.core.messages import NO_SUBJECT, Report, TaskAck, TaskCommand, make_msg_id
 from swarmbox.core.stages import check_transition
-from swarmbox.record.schema import NO_SUBJECT
 
 Row = tuple
 _ABORT = int(Stage.ABORT)

@@ -19,13 +19,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 from swarmbox.api import Setpoint, Telemetry
 from swarmbox.hal.mavlink.codec import (
     CMD_ARM_DISARM,
     CMD_LAND,
+    CMD_REQUEST_MESSAGE,
     CMD_RTL,
     CMD_SET_MESSAGE_INTERVAL,
     CMD_SET_MODE,
@@ -54,6 +54,7 @@ from swarmbox.hal.mavlink.codec import (
 )
 from swarmbox.hal.mavlink.frames import VehicleFrame
 from swarmbox.hal.mavlink.link import Command, CommandTracker, VehicleLink
+from swarmbox.hal.px4.params import LinkConfig
 from swarmbox.hal.safety import SafetyLimits, check_setpoint
 
 Vec3 = tuple[float, float, float]
@@ -65,25 +66,10 @@ _HAS_LINK_FIELD = "link_ok" in Telemetry._fields
 WARNING_SEVERITY = 4          # STATUSTEXT at this severity or worse becomes an event
 STATE_GRACE_S = 0.3           # a HEARTBEAT this soon after an accepted command may predate it
 SILENCE_AFTER = 20            # unrequested packets of one id before asking PX4 to stop them
+_NOT_CRITICAL = frozenset((CMD_SET_MESSAGE_INTERVAL, CMD_REQUEST_MESSAGE))
 WANTED = frozenset(MSG[m] for m in (
     "HEARTBEAT", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "GPS_RAW_INT", "SYS_STATUS",
     "EXTENDED_SYS_STATE", "COMMAND_ACK", "STATUSTEXT", "HIL_STATE_QUATERNION"))
-
-
-@dataclass(frozen=True, slots=True)
-class LinkConfig:
-    """Per-vehicle link timing (all in vehicle/run seconds, i.e. sped up with the simulation)."""
-
-    component_id: int = 1
-    link_timeout_s: float = 3.0
-    heartbeat_rate_hz: float = 1.0
-    setpoint_rate_hz: float = 20.0
-    offboard_lead_s: float = 0.5
-    command_timeout_s: float = 1.0
-    command_retries: int = 5
-    stats_every_s: float = 10.0
-    silence_unrequested: bool = True
-    message_rates_hz: tuple[tuple[str, float], ...] = ()
 
 
 class Px4Vehicle:
@@ -94,9 +80,10 @@ class Px4Vehicle:
         self.drone_id, self.home_ned_m = drone_id, frame.home_ned_m
         self._link, self._cfg, self._frame, self._limits, self._emit = link, cfg, frame, limits, emit
         self._target = (link.system_id, cfg.component_id)
-        self._enc = GcsEncoder()
+        self._enc = GcsEncoder(signing_key=cfg.signing_key, link_id=drone_id & 0xFF)
         self._cmds = CommandTracker(self._send_command, self._command_report, cfg.command_timeout_s,
-                                    cfg.command_retries, self._command_timed_out)
+                                    cfg.command_retries, self._command_timed_out, self._command_failed)
+        self.failure = ""                          # the latest flight command the autopilot refused
         self._on_regain: Command | None = None      # the last command lost with the link
         self._now = 0.0
         self.connected = self.link_lost = False
@@ -118,6 +105,8 @@ class Px4Vehicle:
         self._silenced: dict[int, tuple[int, float, int]] = {}   # msg id -> (tries, at_s, count then)
         self._checks_s = self._stats_s = 0.0
         self._bad_seen, self._foreign_seen, self._odd_acks = (0, 0), set(), set()
+        self._conflicts_seen: set[tuple[str, int]] = set()
+        self._signature_rejected = 0
         self.clock_pairs: list[tuple[float, float]] = []   # (vehicle boot s, our clock - boot) minima
         self._handlers: dict[type, Callable[[Any], None]] = {
             LocalPositionMsg: self._on_local, GlobalPositionMsg: self._on_global, GnssMsg: self._on_gnss,
@@ -205,6 +194,9 @@ class Px4Vehicle:
             self._gcs_hb_s = now_s
             self._link.send(self._enc.heartbeat())
         if not self.connected:
+            if now_s - self._checks_s >= 1.0:   # why not: packets from other system ids?
+                self._checks_s = now_s
+                self._report_link()
             return
         if not self.link_lost and now_s - self._hb_s > self._cfg.link_timeout_s:
             self._lose_link()
@@ -317,6 +309,14 @@ class Px4Vehicle:
         if self.link_lost and not cmd.quiet and cmd.command != CMD_SET_MESSAGE_INTERVAL:
             self._on_regain = cmd
 
+    def _command_failed(self, cmd: Command, result: str) -> None:
+        """A flight command refused to the end of its retries: a ``failure`` event (the drone aborts)."""
+        if cmd.command in _NOT_CRITICAL or (self.link_lost and result == "no ack"):
+            return   # a lost link is reported as such (and the command resent when it is regained)
+        self.failure = f"autopilot refused {cmd.name} ({result} after {cmd.tries} tries)"
+        self._emit("failure", "command_failed", {"command": cmd.name, "result": result, "tries": cmd.tries,
+                                                 "reason": self.failure})
+
     def _send_command(self, command: int, params: tuple[float, ...], confirmation: int) -> bool:
         return self._link.send(self._enc.command(self._target, command, params, confirmation))
 
@@ -381,7 +381,17 @@ class Px4Vehicle:
             self._bad_seen = bad
         for sysid in st.foreign.keys() - self._foreign_seen:
             self._foreign_seen.add(sysid)
-            self._emit("link", "foreign_system", {"system_id": sysid, "packets": st.foreign[sysid]})
+            data = {"system_id": sysid, "packets": st.foreign[sysid], "expected": self.system_id}
+            self._emit("link", "foreign_system" if self.connected else "wrong_system_id", data)
+        for addr in st.conflicts.keys() - self._conflicts_seen:
+            self._conflicts_seen.add(addr)
+            bound = self._link.bound
+            self._emit("link", "conflict", {"system_id": self.system_id, "address": f"{addr[0]}:{addr[1]}",
+                                            "bound": f"{bound[0]}:{bound[1]}" if bound else None,
+                                            "packets": st.conflicts[addr], "action": "dropped"})
+        if dec.signature_rejected != self._signature_rejected:
+            self._emit("link", "signature_rejected", {"packets": dec.signature_rejected - self._signature_rejected})
+            self._signature_rejected = dec.signature_rejected
         if self._now - self._stats_s >= self._cfg.stats_every_s:
             self._stats_s = self._now
             self._emit("link", "stats", st.as_dict(dec))

@@ -311,7 +311,8 @@ class Px4Vehicle:
 
     def _command_failed(self, cmd: Command, result: str) -> None:
         """A flight command refused to the end of its retries: a ``failure`` event (the drone aborts)."""
-        if cmd.command in _NOT_CRITICAL or (self.link_lost and result == "no ack"):
+        disarm = cmd.command == CMD_ARM_DISARM and cmd.params[:1] == (0.0,)   # refused in the air: right
+        if cmd.command in _NOT_CRITICAL or disarm or (self.link_lost and result == "no ack"):
             return   # a lost link is reported as such (and the command resent when it is regained)
         self.failure = f"autopilot refused {cmd.name} ({result} after {cmd.tries} tries)"
         self._emit("failure", "command_failed", {"command": cmd.name, "result": result, "tries": cmd.tries,

@@ -311,11 +311,8 @@ class Decoder:
         if signing_key is not None:
             self._mav.signing.secret_key = signing_key   # pymavlink then rejects unsigned packets
         self.packets = self.decoded = self.skipped = self.bad_packets = self.garbage_bytes = 0
+        self.signature_rejected = 0
         self.skipped_ids: dict[int, int] = {}
-
-    @property
-    def signature_rejected(self) -> int:
-        return int(self._mav.signing.reject_count + self._mav.signing.badsig_count)
 
     def decode(self, data: bytes) -> Iterator[tuple[Packet, Any]]:
         """Yield ``(packet, value)`` for every wanted, valid packet of ``data``."""
@@ -332,7 +329,11 @@ class Decoder:
             try:
                 msg = mav.decode(bytearray(data[item.start:item.end]))
                 value = DECODERS[item.msg_id](msg)
-            except (MAVError, KeyError, ValueError, TypeError, AttributeError):
+            except MAVError as exc:
+                self.bad_packets += 1
+                self.signature_rejected += str(exc) == "Invalid signature"
+                continue
+            except (KeyError, ValueError, TypeError, AttributeError):
                 self.bad_packets += 1
                 continue
             self.decoded += 1

@@ -51,3 +51,25 @@ def test_formation_on_four_px4_instances(run):
         assert not st.iloc[-1]["armed"] and st.iloc[-1]["landed"], f"drone {i} did not land"
         sp = table(d, f"drone_{i}", "setpoints")
         assert len(sp) and math.isfinite(sp["n"].iloc[-1])
+
+
+def test_leader_px4_killed_followers_hand_over_and_finish(run):
+    """Killing the leader's PX4 instance: its drone loses the link and aborts, the followers hand
+    over to the next successor (the ground) and the mission completes with three drones."""
+    def kill_leader(swarm) -> None:
+        swarm.backend.launcher.procs[0].kill()
+
+    manifest, d = run("backend=px4", f"backend.px4_build={BUILD}", f"run.speed={SPEED:g}",
+                      "backend.sitl.logger=false", "topology=leader_follower", name="px4leader",
+                      prepare=lambda s: s.schedule(30.0, kill_leader))
+    stages = table(d, "drone_0", "stages")
+    assert stages["name"].iloc[-1] == "ABORT" and stages["reason"].iloc[-1] == "link to the autopilot lost"
+    for follower in (1, 2, 3):
+        ev = table(d, f"drone_{follower}", "events")
+        assert "superior_aborted" in set(ev["name"]), f"drone {follower} did not see its leader abort"
+        handover = ev[ev["name"] == "handover"]
+        assert len(handover) == 1 and 30.0 < handover["t_s"].iloc[0] < 36.0
+        assert table(d, f"drone_{follower}", "stages")["name"].iloc[-1] == "TERMINATION"
+        last = table(d, f"drone_{follower}", "state").iloc[-1]
+        assert last["landed"] and not last["armed"], f"drone {follower} did not land"
+    assert "drones [0] aborted" in manifest["reason"] or "drone 0 link lost" in manifest["reason"], manifest

@@ -9,6 +9,14 @@ Connection strings (one per vehicle):
 - ``udp:LHOST:LPORT@RHOST:RPORT`` — listen on LHOST:LPORT and send to RHOST:RPORT from the start.
   PX4 keeps the first address that talks to it for good, so a fixed local port lets a later run
   reach the same, already running, instance.
+
+Why not ``pymavlink.mavutil.mavlink_connection``: its UDP endpoint re-learns the peer from every
+packet that arrives (the impostor problem this link's address binding fixes) and parses every
+message; the bridge reads many vehicles from one thread without blocking and decodes only the
+messages it wants. pymavlink still does all encoding, decoding, CRC and signing. Measured
+(``tests/bench/test_bench_mavlink.py``, one second of PX4-like traffic, 363 packets, 59 wanted;
+median of 30 interleaved rounds, load average 15 on 2 cores): own framing 4.5 ms, pymavlink's
+``parse_buffer`` 15.8 ms, 3.5x slower.
 """
 
 from __future__ import annotations

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 import os
 import struct
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -200,3 +202,33 @@ def test_launcher_runs_eleven_instances_on_px4_port_plan(tmp_path, monkeypatch):
         assert (tmp_path / "run" / "px4" / f"instance_{i}" / "out.log").is_file()
         ulog = local_position(tmp_path / "run", i)
         assert len(ulog) == 10 and ulog["pos_n"][0] == pytest.approx(3.0 * i)
+
+
+def test_launching_and_closing_px4_loads_no_pandas(tmp_path):
+    """The run path of a launched fleet (start, fly, stop, index the ULogs) never loads pandas or pyulog."""
+    if not ports_free([14543, 14583]):
+        pytest.skip("PX4's SITL ports on 127.0.0.1 are in use on this machine")
+    build = tmp_path / "build"
+    (build / "bin").mkdir(parents=True)
+    (build / "etc").mkdir()
+    (build / "bin" / "px4").write_text(FAKE_PX4.replace('--instance "$2"', '--instance 3'))
+    (build / "bin" / "px4").chmod(0o755)
+    fake_ulog(build / "fake.ulg", [(k * 200_000, 0.0, 0.0, -0.1 * k) for k in range(10)])
+    code = f"""
+import sys, numpy as np
+from swarmbox.hal.px4 import backend, sitl
+sitl.connection_of = lambda i: "udpin:127.0.0.1:14543"
+backend.SitlLauncher.connections = lambda self: ["udpin:127.0.0.1:14543"]
+b = backend.Px4Backend(homes_ned_m=[(0.0, 0.0, 0.0)], tick_s=0.025, rng=np.random.default_rng(0),
+                       px4_build={str(build)!r}, run_dir={str(tmp_path / "run")!r}, speed=2.0, system_ids=[4])
+for _ in range(40):
+    b.step(0.025)
+b.close()
+print(sorted({{"pandas", "pyulog", "matplotlib"}} & set(sys.modules)))
+"""
+    env = {**os.environ, "SWARMBOX_TEST_PYTHON": sys.executable,
+           "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
+    assert proc.returncode == 0 and proc.stdout.strip() == "[]", proc.stdout + proc.stderr
+    assert (tmp_path / "run" / "logs" / "drone_0" / "ulog.json").is_file()
+    assert len(local_position(tmp_path / "run", 0)) == 10

@@ -26,7 +26,6 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from swarmbox.hal.mavlink.codec import FAILURE_OFF, FAILURE_OK, FAILURE_UNIT_GPS
 from swarmbox.hal.mavlink.frames import GeoFrame, VehicleFrame
 from swarmbox.hal.mavlink.link import VehicleLink
 from swarmbox.hal.px4.params import BootClock, Px4Params, boot_clock_fit
@@ -97,11 +96,6 @@ class Px4Backend:
             raise
         self.t0_s = self._clock_s
         self._events = [e._replace(t_s=e.t_s - self.t0_s) for e in self._events]
-
-    @property
-    def gnss_available(self) -> GnssSwitch:
-        """GNSS on/off per vehicle, through PX4's failure injection (the ``gps_dropout`` fault)."""
-        return GnssSwitch(self.vehicles)
 
     @property
     def t_s(self) -> float:
@@ -214,25 +208,6 @@ class Px4Backend:
         a -= self.t0_s
         spec = self.params.clocks.get(f"drone_{i}") or {}
         return BootClock(a, b, float(spec.get("offset_s", 0.0)), 1.0 + float(spec.get("drift_ppm", 0.0)) * 1e-6)
-
-
-class GnssSwitch:
-    """``gnss_available[i] = False`` asks vehicle i's autopilot to fail its GNSS (FAILURE_TYPE_OFF),
-    ``True`` restores it: the fault input the ``gps_dropout`` fault sets on the sim backend."""
-
-    def __init__(self, vehicles: Sequence[Px4Vehicle]) -> None:
-        self._vehicles = vehicles
-
-    def __len__(self) -> int:
-        return len(self._vehicles)
-
-    def __getitem__(self, i: int) -> bool:
-        return self._vehicles[i].gnss_ok
-
-    def __setitem__(self, i: int, available: bool) -> None:
-        v = self._vehicles[i]
-        v.gnss_ok = bool(available)
-        v.inject_failure(FAILURE_UNIT_GPS, FAILURE_OK if available else FAILURE_OFF)
 
 
 def _why_silent(links: list[VehicleLink], missing: list[Px4Vehicle]) -> str:

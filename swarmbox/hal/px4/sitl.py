@@ -141,7 +141,6 @@ def instance_env(home_geo: tuple[float, float, float], options: SitlOptions, spe
         env["PX4_SIM_SPEED_FACTOR"] = f"{speed:g}"
     if not options.logger:
         env["PX4_PARAM_SDLOG_MODE"] = "-1"
-    env["PX4_PARAM_SYS_FAILURE_EN"] = "1"   # failure injection (MAV_CMD_INJECT_FAILURE) for GNSS faults
     for name, value in options.params.items():
         env[f"PX4_PARAM_{name.upper()}"] = str(value)
     return env

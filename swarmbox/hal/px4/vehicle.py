@@ -24,7 +24,6 @@ from typing import Any
 from swarmbox.api import Setpoint, Telemetry
 from swarmbox.hal.mavlink.codec import (
     CMD_ARM_DISARM,
-    CMD_INJECT_FAILURE,
     CMD_LAND,
     CMD_REQUEST_MESSAGE,
     CMD_RTL,
@@ -67,7 +66,7 @@ _ZERO3 = (0.0, 0.0, 0.0)
 WARNING_SEVERITY = 4          # STATUSTEXT at this severity or worse becomes an event
 STATE_GRACE_S = 0.3           # a HEARTBEAT this soon after an accepted command may predate it
 SILENCE_AFTER = 20            # unrequested packets of one id before asking PX4 to stop them
-_NOT_CRITICAL = frozenset((CMD_SET_MESSAGE_INTERVAL, CMD_REQUEST_MESSAGE, CMD_INJECT_FAILURE))
+_NOT_CRITICAL = frozenset((CMD_SET_MESSAGE_INTERVAL, CMD_REQUEST_MESSAGE))
 WANTED = frozenset(MSG[m] for m in (
     "HEARTBEAT", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "GPS_RAW_INT", "SYS_STATUS",
     "EXTENDED_SYS_STATE", "COMMAND_ACK", "STATUSTEXT", "HIL_STATE_QUATERNION"))
@@ -85,7 +84,6 @@ class Px4Vehicle:
         self._cmds = CommandTracker(self._send_command, self._command_report, cfg.command_timeout_s,
                                     cfg.command_retries, self._command_timed_out, self._command_failed)
         self.failure = ""                          # the latest flight command the autopilot refused
-        self.gnss_ok = True                        # False while a GNSS failure is injected
         self._on_regain: Command | None = None      # the last command lost with the link
         self._now = 0.0
         self.connected = self.link_lost = False
@@ -177,10 +175,6 @@ class Px4Vehicle:
         self._stop_offboard()
         main, sub = px4_main_sub(MODE_HOLD)
         self._submit(CMD_SET_MODE, (CUSTOM_MODE_FLAG, main, sub), lambda: self._set_mode(MODE_HOLD))
-
-    def inject_failure(self, unit: int, failure_type: int) -> None:
-        """PX4's own failure injection (MAV_CMD_INJECT_FAILURE; the autopilot needs SYS_FAILURE_EN=1)."""
-        self._submit(CMD_INJECT_FAILURE, (float(unit), float(failure_type), 0.0))
 
     # ---- servicing (called by the backend every step) -----------------------------------------
     def service(self, now_s: float) -> None:

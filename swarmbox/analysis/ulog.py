@@ -65,7 +65,8 @@ def local_position(run_dir: Path, drone: int) -> pd.DataFrame:
             for flag in _FLAGS:
                 cols[flag] = d[flag].astype(bool) if flag in d else np.zeros(len(stamp), dtype=bool)
             for counter in _COUNTERS:
-                cols[counter] = d[counter].astype(np.int64) if counter in d else np.zeros(len(stamp), np.int64)
+                zeros = np.zeros(len(stamp), np.int64)
+                cols[counter] = d[counter].astype(np.int64) if counter in d else zeros
             cols["ulog_file"] = Path(name).name
             parts.append(pd.DataFrame(cols))
     if not parts:

@@ -6,7 +6,6 @@ reason, nothing left armed, and the run over once nothing is left flying."""
 from __future__ import annotations
 
 import json
-import math
 import signal
 import subprocess
 import sys
@@ -78,15 +77,16 @@ def test_autopilot_denying_arm_aborts_that_drone_with_the_reason(run):
     assert stage == "ABORT" and reason == "autopilot refused arm_disarm (denied after 3 tries)"
     for i in (0, 2, 3):
         assert stage_reason(d, i)[0] == "TERMINATION"
-    assert ("drones [1] aborted" in manifest["reason"]
-            or "drone 1 landed and disarmed (ABORT: autopilot refused arm_disarm" in manifest["reason"]), manifest
+    reason = manifest["reason"]
+    assert ("drones [1] aborted" in reason
+            or "drone 1 landed and disarmed (ABORT: autopilot refused arm_disarm" in reason), manifest
     assert manifest["sim_time_s"] < 60
     assert_nothing_armed_in_the_air(d)
 
 
 @pytest.mark.slow
 def test_vehicle_heartbeat_stopping_is_a_lost_link_and_the_run_ends(run):
-    pytest.importorskip("swarmbox.core.ending", reason="needs the run-end condition: every drone down or lost")
+    pytest.importorskip("swarmbox.core.ending", reason="needs the run end when every drone is down or lost")
     frozen: list = []
 
     def freeze(swarm) -> None:

@@ -30,8 +30,8 @@ pytestmark = [pytest.mark.slow,
 
 def px4_fleet(homes, **kw) -> Px4Backend:
     kw.setdefault("speed", SPEED)
-    return Px4Backend(homes_ned_m=list(homes), tick_s=0.025, rng=np.random.default_rng(1), px4_build=str(BUILD),
-                      sitl={"logger": False, "start_stagger_s": 0.1}, **kw)
+    return Px4Backend(homes_ned_m=list(homes), tick_s=0.025, rng=np.random.default_rng(1),
+                      px4_build=str(BUILD), sitl={"logger": False, "start_stagger_s": 0.1}, **kw)
 
 
 @pytest.mark.parametrize("check", BACKEND_CHECKS, ids=lambda c: c.__name__)

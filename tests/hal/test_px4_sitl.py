@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from swarmbox.analysis.ulog import local_position
 from swarmbox.hal.mavlink.frames import GeoFrame
 from swarmbox.hal.mavlink.link import parse_connection
-from swarmbox.analysis.ulog import local_position
 from swarmbox.hal.px4.params import BootClock
 from swarmbox.hal.px4.sitl import (
     SitlOptions,

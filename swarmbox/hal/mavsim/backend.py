@@ -134,7 +134,8 @@ def _refusals(refuse: Mapping[Any, Sequence[str]], n: int) -> dict[str, tuple[st
     known = {f"drone_{i}" for i in range(n)}
     bad = [k for k in refuse if str(k) not in known]
     if bad:
-        raise ValueError(f"mavsim backend: refuse names unknown vehicles {bad} (use drone_0 .. drone_{n - 1})")
+        raise ValueError(f"mavsim backend: refuse names unknown vehicles {bad} "
+                         f"(use drone_0 .. drone_{n - 1})")
     return {str(k): tuple(str(c) for c in v) for k, v in refuse.items()}
 
 

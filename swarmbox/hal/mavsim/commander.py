@@ -21,11 +21,11 @@ from collections.abc import Callable
 from swarmbox.api import FlightMode, Setpoint, Telemetry
 from swarmbox.hal.mavlink.codec import (
     CMD_ARM_DISARM,
-    COMMAND_NAMES,
     CMD_LAND,
     CMD_RTL,
     CMD_SET_MODE,
     CMD_TAKEOFF,
+    COMMAND_NAMES,
     CUSTOM_MODE_FLAG,
     LANDED_IN_AIR,
     LANDED_LANDING,

@@ -43,8 +43,8 @@ from swarmbox.hal.mavlink.codec import (
     SetpointTargetMsg,
 )
 from swarmbox.hal.mavlink.frames import GeoFrame
-from swarmbox.hal.mavsim.link import DEFAULT_RATES_HZ, AutopilotSocket, Streams, VehicleEncoder, VehicleState
 from swarmbox.hal.mavsim.commander import Commander
+from swarmbox.hal.mavsim.link import DEFAULT_RATES_HZ, AutopilotSocket, Streams, VehicleEncoder, VehicleState
 from swarmbox.hal.safety import SafetyLimits
 from swarmbox.hal.sim.backend import SimBackend
 from swarmbox.hal.sim.params import SimParams

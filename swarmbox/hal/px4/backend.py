@@ -6,7 +6,8 @@ safety monitor. Each vehicle is a :class:`~swarmbox.hal.px4.vehicle.Px4Vehicle`;
 serviced without blocking inside :meth:`Px4Backend.step`, which the run loop paces on the wall clock
 (``realtime = True``, sped up by ``run.speed`` when the vehicles are simulated faster).
 
-With a PX4 build (``px4_build``: a path, or ``auto`` to find one), the backend also starts one PX4 SITL instance per vehicle
+With a PX4 build (``px4_build``: a path, or ``auto`` to find one), the backend also starts one PX4
+SITL instance per vehicle
 (:mod:`swarmbox.hal.px4.sitl`), waits until all are ready to arm, stops them at :meth:`close` and
 puts each instance's ULog on the run's timeline. Without it, it connects to vehicles that already run.
 
@@ -148,9 +149,9 @@ class Px4Backend:
                 self.launcher.check()
             if now - start > timeout_s:
                 missing = [v for v in self.vehicles if not done(v)]
-                raise TimeoutError(f"px4 backend: vehicles (id, connection) "
-                                   f"{[(v.drone_id, self._links[v.drone_id].endpoint.spec) for v in missing]} "
-                                   f"not {what} within {timeout_s:g} s{_why_silent(self._links, missing)}")
+                ids = [(v.drone_id, self._links[v.drone_id].endpoint.spec) for v in missing]
+                raise TimeoutError(f"px4 backend: vehicles (id, connection) {ids} not {what} within "
+                                   f"{timeout_s:g} s{_why_silent(self._links, missing)}")
             time.sleep(0.01)
 
     # ---- Backend protocol ---------------------------------------------------------------------
@@ -207,7 +208,8 @@ class Px4Backend:
         a, b = boot_clock_fit(self.vehicles[i].clock_pairs if i < len(self.vehicles) else [])
         a -= self.t0_s
         spec = self.params.clocks.get(f"drone_{i}") or {}
-        return BootClock(a, b, float(spec.get("offset_s", 0.0)), 1.0 + float(spec.get("drift_ppm", 0.0)) * 1e-6)
+        scale = 1.0 + float(spec.get("drift_ppm", 0.0)) * 1e-6
+        return BootClock(a, b, float(spec.get("offset_s", 0.0)), scale)
 
 
 def _why_silent(links: list[VehicleLink], missing: list[Px4Vehicle]) -> str:

@@ -80,8 +80,8 @@ class Px4Params:
         for key in params:
             if key not in known:
                 raise TypeError(f"unknown px4 backend parameter {key!r} (known: {', '.join(sorted(known))})")
-        kw = {k: v for k, v in params.items() if v is not None or k in ("connections", "system_ids",
-                                                                         "px4_build", "run_dir", "signing_key")}
+        nullable = ("connections", "system_ids", "px4_build", "run_dir", "signing_key")
+        kw = {k: v for k, v in params.items() if v is not None or k in nullable}
         for key in ("connections", "system_ids"):
             if kw.get(key) is not None:
                 kw[key] = tuple(kw[key])
@@ -103,7 +103,8 @@ class Px4Params:
             raise ValueError(f"px4 backend: message_rates_hz names unknown MAVLink messages {unknown}")
         GeoFrame(self.origin_lat_deg, self.origin_lon_deg, self.origin_alt_m)
         if not isinstance(self.command_retries, int) or self.command_retries < 0:
-            raise ValueError(f"px4 backend: command_retries must be an integer >= 0, got {self.command_retries!r}")
+            raise ValueError(f"px4 backend: command_retries must be an integer >= 0, "
+                             f"got {self.command_retries!r}")
         self.signing_bytes()
 
     def link_config(self) -> LinkConfig:

@@ -32,6 +32,7 @@ from __future__ import annotations
 import atexit
 import json
 import os
+import shutil
 import signal
 import subprocess
 import tempfile
@@ -158,6 +159,7 @@ class SitlLauncher(ProcessSet):
         self.build = build
         self.options = SitlOptions.from_mapping(params.sitl)
         self.homes, self.frame, self.speed = homes, frame, params.speed
+        self._own_dir = run_dir is None   # a temporary working directory, removed after the run
         self.work_dir = (run_dir / "px4" if run_dir is not None
                          else Path(tempfile.mkdtemp(prefix="swarmbox_px4_")))
         self.binary = runnable_px4(build, self.work_dir)
@@ -210,6 +212,8 @@ class SitlLauncher(ProcessSet):
 
     def collect(self, run_dir: Path | None, clocks: list[BootClock]) -> None:
         """Index each instance's ULogs with its clock and home in ``logs/drone_<i>/ulog.json``."""
+        if self._own_dir:
+            shutil.rmtree(self.work_dir, ignore_errors=True)
         if run_dir is None or not self.options.logger:
             return
         for i, home in enumerate(self.homes):

@@ -118,9 +118,23 @@ def _track(rows: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
     return rows["pos_e"].to_numpy(dtype="float64"), rows["pos_n"].to_numpy(dtype="float64")
 
 
+#: Above this many drones a per-drone line and legend entry stops helping; figures summarize instead.
+MANY_DRONES = 30
+#: Tracks drawn on top of the density when the swarm is large.
+SAMPLED_TRACKS = 12
+
+
 def trajectories(state: pd.DataFrame, *, ax: Axes | None = None) -> Figure:
-    """Every drone's horizontal path (x = East, y = North, equal axes), start marked with its id."""
+    """Every drone's horizontal path (x = East, y = North, equal axes), start marked with its id.
+
+    Above :data:`MANY_DRONES` drones: a log-scaled density of every position sample, every start as
+    a dot, and :data:`SAMPLED_TRACKS` evenly chosen drones' tracks — readable at 1,000 drones, and
+    the heavy layers are rasterized so an SVG stays small.
+    """
     fig, ax = _axes(ax)
+    drones = np.sort(state["node"].unique())
+    if len(drones) > MANY_DRONES:
+        return _trajectory_density(state, drones, fig, ax)
     for drone, rows in state.sort_values(T).groupby("node", sort=True):
         east, north = _track(rows)
         (line,) = ax.plot(east, north, lw=1.2, label=f"drone {drone}")
@@ -134,14 +148,39 @@ def trajectories(state: pd.DataFrame, *, ax: Axes | None = None) -> Figure:
     return fig
 
 
+def _trajectory_density(state: pd.DataFrame, drones: np.ndarray, fig: Figure, ax: Axes) -> Figure:
+    east, north = _track(state)
+    ok = np.isfinite(east) & np.isfinite(north)
+    if ok.any():
+        hb = ax.hexbin(east[ok], north[ok], gridsize=120, bins="log", cmap="Greys", mincnt=1, linewidths=0)
+        hb.set_rasterized(True)
+        fig.colorbar(hb, ax=ax, label="samples (log)")
+    firsts = state.sort_values(T).groupby("node", sort=True).head(1)
+    e0, n0 = _track(firsts)
+    ax.scatter(e0, n0, s=4, color="tab:blue", label=f"start ({len(drones)} drones)", rasterized=True)
+    chosen = drones[np.linspace(0, len(drones) - 1, SAMPLED_TRACKS).round().astype(int)]
+    for drone in np.unique(chosen):
+        e, n = _track(state[state["node"] == drone].sort_values(T))
+        ax.plot(e, n, lw=0.9, color="tab:orange", alpha=0.9)
+    ax.plot([], [], color="tab:orange", label=f"{len(np.unique(chosen))} sampled tracks")
+    ax.set_xlabel("East (m)")
+    ax.set_ylabel("North (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(loc="upper right", fontsize="small")
+    return fig
+
+
 def timeline(frame: pd.DataFrame, *, metric: str, onset: float | None = None, detection: float | None = None,
              target: int | None = None, ax: Axes | None = None) -> Figure:
     """One metric per drone over unified time, with the fault onset and the first detection marked."""
     fig, ax = _axes(ax, (8.0, 4.0))
     data = frame[frame["metric"] == metric]
-    for drone, rows in data.groupby("drone", sort=True):
-        ax.plot(rows[T], rows["value"], lw=2.0 if drone == target else 1.0,
-                label=f"drone {drone}" + (" (target)" if drone == target else ""))
+    if data["drone"].nunique() > MANY_DRONES:
+        _band(data, ax, target)
+    else:
+        for drone, rows in data.groupby("drone", sort=True):
+            ax.plot(rows[T], rows["value"], lw=2.0 if drone == target else 1.0,
+                    label=f"drone {drone}" + (" (target)" if drone == target else ""))
     if onset is not None:
         ax.axvline(onset, color="red", ls="--", label="fault onset")
     if detection is not None:
@@ -150,6 +189,18 @@ def timeline(frame: pd.DataFrame, *, metric: str, onset: float | None = None, de
     ax.set_ylabel(metric)
     ax.legend(loc="best", fontsize="small")
     return fig
+
+
+def _band(data: pd.DataFrame, ax: Axes, target: int | None) -> None:
+    """Many drones: the median over drones per window, the 5-95 % band, the extremes, the target."""
+    per = data.groupby(T)["value"]
+    q = per.quantile([0.0, 0.05, 0.5, 0.95, 1.0]).unstack()
+    ax.fill_between(q.index, q[0.0], q[1.0], color="tab:blue", alpha=0.12, lw=0, label="min-max")
+    ax.fill_between(q.index, q[0.05], q[0.95], color="tab:blue", alpha=0.3, lw=0, label="5-95 %")
+    ax.plot(q.index, q[0.5], color="tab:blue", lw=1.2, label=f"median of {data['drone'].nunique()} drones")
+    if target is not None:
+        rows = data[data["drone"] == target]
+        ax.plot(rows[T], rows["value"], color="tab:red", lw=1.5, label=f"drone {target} (target)")
 
 
 def _layout(nodes: list[int]) -> dict[int, tuple[float, float]]:

@@ -73,15 +73,15 @@ class _SpillWriter(threading.Thread):
         self.writers: dict[str, pq.ParquetWriter] = {}
         #: table -> row group index -> [(node, offset, count)]
         self.layout: dict[str, list[list[tuple[int, int, int]]]] = {}
-        self.error: BaseException | None = None
+        self.errors: list[str] = []
 
     def run(self) -> None:
         while (chunk := self.inbox.get()) is not None:
-            if self.error is None:
-                try:
-                    self._write(chunk)
-                except BaseException as exc:  # noqa: BLE001 - reported by close()
-                    self.error = exc
+            try:
+                self._write(chunk)
+            except Exception as exc:  # noqa: BLE001 - reported by close(); later chunks still written
+                self.errors.append(f"{chunk.table} rows of nodes {chunk.nodes[:5]}...: "
+                                   f"{type(exc).__name__}: {exc}")
 
     def _write(self, chunk: _Chunk) -> None:
         node = np.repeat(np.asarray(chunk.nodes, np.int16), chunk.counts)
@@ -98,10 +98,12 @@ class _SpillWriter(threading.Thread):
             [(n, o, c) for n, o, c in zip(chunk.nodes, offsets, chunk.counts, strict=True)])
 
     def finish(self) -> None:
-        self.inbox.put(None)
-        self.join()
+        if self.is_alive():
+            self.inbox.put(None)
+            self.join()
         for writer in self.writers.values():
             writer.close()
+        self.writers.clear()
 
 
 class Recorder:
@@ -130,8 +132,6 @@ class Recorder:
 
     def flush(self) -> None:
         """Hand every buffered row to the background writer (the tick thread does no encoding)."""
-        if self._spill.error is not None:
-            raise OSError(f"log writer failed: {self._spill.error}") from self._spill.error
         if not self._spill.is_alive():
             self._spill.start()
         for table in _ALL_TABLES:
@@ -148,15 +148,9 @@ class Recorder:
 
     def close(self) -> None:
         """Write everything out as per-node files; raise OSError naming what could not be written."""
-        errors: list[str] = []
-        try:
-            self.flush()
-        except OSError as exc:
-            errors.append(str(exc))
-        if self._spill.is_alive():
-            self._spill.finish()
-        if self._spill.error is not None and not errors:
-            errors.append(f"log writer failed: {self._spill.error}")
+        self.flush()
+        self._spill.finish()
+        errors = [f"log writer failed: {e}" for e in self._spill.errors]
         errors += _split(self._spill.root, self._spill.layout, self.root, self.logs)
         if not errors:
             shutil.rmtree(self._spill.root, ignore_errors=True)

@@ -7,6 +7,9 @@ first, so that a shared machine's changing load hits both sides alike. The table
 real-time factors (simulated s per wall s of the tick loop) and the framework / bare-loop ratio of
 agent-steps per second, which is the same ratio because both tick at 40 Hz. The load average is
 printed before and after: ratios from a loaded machine are comparable, absolute rates are not.
+The same ratio from CPU time is printed too (the tick loop's process CPU seconds; for the bare loop,
+its whole-process CPU minus that of a one-tick run): on an oversubscribed machine it is the steadier
+of the two.
 
     python -m swarmbox.bench                       # 5, 36, 200, 1000 drones, 2 rounds
     python -m swarmbox.bench --sizes 5 36 --rounds 3 --json results/bench.json
@@ -46,6 +49,10 @@ def measure(sizes: list[int], rounds: int, floor: Path, floor_s: float, hover_s:
                 pair.reverse()
             for cmd in pair:
                 row = _run(cmd)
+                if row["system"] == "floor":
+                    # the bare loop reports whole-process CPU; subtract a one-tick run's (imports, build)
+                    setup = _run([env_python, str(floor), str(n), "0.025"])["cpu_s"]
+                    row["loop_cpu_s"] = max(row["cpu_s"] - setup, 1e-9)
                 row.update(round=r, load1=os.getloadavg()[0])
                 print(json.dumps(row), file=sys.stderr, flush=True)
                 rows.append(row)
@@ -59,17 +66,24 @@ def table(rows: list[dict], sizes: list[int]) -> list[dict]:
         floor = [r["rtf"] for r in rows if r["n"] == n and r["system"] == "floor"]
         box = [r["rtf"] for r in rows if r["n"] == n and r["system"] == "swarmbox"]
         f, b = statistics.median(floor), statistics.median(box)
+        f_cpu = statistics.median(r["sim_s"] / r["loop_cpu_s"] for r in rows
+                                  if r["n"] == n and r["system"] == "floor")
+        b_cpu = statistics.median(r["sim_s"] / r["loop_cpu_s"] for r in rows
+                                  if r["n"] == n and r["system"] == "swarmbox")
         out.append({"drones": n, "bare_rtf": f, "swarmbox_rtf": b, "ratio": b / f,
-                    "ratio_min": min(box) / max(floor), "ratio_max": max(box) / min(floor), "rounds": len(box)})
+                    "ratio_min": min(box) / max(floor), "ratio_max": max(box) / min(floor),
+                    "bare_cpu_rtf": f_cpu, "swarmbox_cpu_rtf": b_cpu, "cpu_ratio": b_cpu / f_cpu,
+                    "rounds": len(box)})
     return out
 
 
 def markdown(summary: list[dict], load: tuple[float, float]) -> str:
-    lines = ["| drones | bare loop RTF | SwarmBox hover RTF | framework / bare loop (range) |",
-             "|---|---|---|---|"]
+    lines = ["| drones | bare loop RTF | SwarmBox hover RTF | framework / bare loop (range) "
+             "| CPU-time RTF bare / SwarmBox | CPU-time ratio |", "|---|---|---|---|---|---|"]
     for s in summary:
         lines.append(f"| {s['drones']} | {s['bare_rtf']:.3g} | {s['swarmbox_rtf']:.3g} | "
-                     f"{s['ratio']:.2f} ({s['ratio_min']:.2f}-{s['ratio_max']:.2f}) |")
+                     f"{s['ratio']:.2f} ({s['ratio_min']:.2f}-{s['ratio_max']:.2f}) | "
+                     f"{s['bare_cpu_rtf']:.3g} / {s['swarmbox_cpu_rtf']:.3g} | {s['cpu_ratio']:.2f} |")
     lines.append(f"\nload average (1 min): {load[0]:.2f} before, {load[1]:.2f} after; {os.cpu_count()} cores")
     return "\n".join(lines)
 

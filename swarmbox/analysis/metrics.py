@@ -17,8 +17,9 @@ Per drone:
 Across drones: mean and population standard deviation (ddof 0) of the per-drone values.
 Safety and swarm metrics align drones on the run's global ``tick``:
 - separation at a tick = smallest 3-D distance over drone pairs (truth if every drone has it, else the
-  estimate; nearest neighbours from a k-d tree, never an N x N matrix); ``min_separation_m`` its minimum over the window; ``time_below_separation_s`` = ticks
-  with separation < threshold x tick length;
+  estimate; nearest neighbours from a k-d tree, never an N x N matrix); ``min_separation_m`` its
+  minimum over the window; ``time_below_separation_s`` = ticks with separation < threshold x tick
+  length;
 - order at a tick = |sum_i v_i| / sum_i |v_i| over the drones' estimated 3-D velocities (NaN when
   the swarm is at rest); ``order_mean`` its mean over the window;
 - collision and safety events are counted over the whole run: a collision matters whenever it happens.

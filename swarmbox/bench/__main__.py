@@ -89,11 +89,12 @@ def markdown(summary: list[dict], load: tuple[float, float]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m swarmbox.bench",
-                                description="SwarmBox vs the bare pymunk loop, interleaved; prints the ratio table.")
+    p = argparse.ArgumentParser(prog="python -m swarmbox.bench", description=(
+        "SwarmBox vs the bare pymunk loop, interleaved; prints the ratio table."))
     p.add_argument("--sizes", type=int, nargs="+", default=[5, 36, 200, 1000], help="swarm sizes")
     p.add_argument("--rounds", type=int, default=2, help="measurements per size and side (2)")
-    p.add_argument("--floor", type=Path, default=DEFAULT_FLOOR, help=f"the bare loop script ({DEFAULT_FLOOR})")
+    p.add_argument("--floor", type=Path, default=DEFAULT_FLOOR,
+                   help=f"the bare loop script ({DEFAULT_FLOOR})")
     p.add_argument("--floor-s", type=float, default=10.0, help="simulated seconds of the bare loop (10)")
     p.add_argument("--hover-s", type=float, default=10.0, help="SwarmBox hover time at altitude, s (10)")
     p.add_argument("--json", type=Path, help="also write every measurement and the table here")

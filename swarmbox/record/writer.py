@@ -22,7 +22,6 @@ import shutil
 import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from itertools import chain
 from pathlib import Path
 
 import numpy as np
@@ -135,16 +134,16 @@ class Recorder:
         if not self._spill.is_alive():
             self._spill.start()
         for table in _ALL_TABLES:
-            nodes, counts, parts = [], [], []
+            nodes, counts, flat = [], [], []
             for log in self.logs.values():
                 rows = log.rows.get(table)
                 if rows:
                     nodes.append(log.node_id)
                     counts.append(len(rows))
-                    parts.append(rows.copy())
+                    flat.extend(rows)   # copies pointers only
                     rows.clear()
             if nodes:
-                self._spill.inbox.put(_Chunk(table, nodes, counts, list(chain.from_iterable(parts))))
+                self._spill.inbox.put(_Chunk(table, nodes, counts, flat))
 
     def close(self) -> None:
         """Write everything out as per-node files; raise OSError naming what could not be written."""

@@ -44,8 +44,8 @@ def test_every_expected_file_exists_even_without_rows_and_nothing_else_is_left(t
     logs = tmp_path / "logs"
     assert sorted(p.relative_to(logs).as_posix() for p in logs.rglob("*")) == sorted([
         "drone_3", "ground", "net", "ground/messages.parquet", "ground/stages.parquet",
-        "ground/events.parquet", "net/messages.parquet", *(f"drone_3/{t}.parquet" for t in
-                                                           ("state", "messages", "stages", "events", "setpoints"))])
+        "ground/events.parquet", "net/messages.parquet",
+        *(f"drone_3/{t}.parquet" for t in ("state", "messages", "stages", "events", "setpoints"))])
     assert pq.read_table(logs / "drone_3" / "state.parquet").num_rows == 1
     assert pq.read_table(logs / "ground" / "events.parquet").num_rows == 0
     assert not (tmp_path / ".spill").exists()

@@ -130,7 +130,8 @@ def _close_pairs(view: tuple[DescendantState, ...], limit_m: float) -> list[tupl
     if len(view) <= 24:
         return [(a, b) for a in range(len(view)) for b in range(a + 1, len(view))
                 if math.dist(view[a].pos_ned_m, view[b].pos_ned_m) < limit_m]
-    from scipy.spatial import cKDTree   # only large swarms need it: keeps scipy out of small runs' startup
+    # only large swarms need it: imported here, it keeps scipy out of small runs' startup
+    from scipy.spatial import cKDTree
 
     pts = np.array([d.pos_ned_m for d in view])
     pairs = cKDTree(pts).query_pairs(limit_m, output_type="ndarray")

@@ -134,59 +134,76 @@ class Recorder:
         if not self._spill.is_alive():
             self._spill.start()
         for table in _ALL_TABLES:
-            nodes, counts, flat = [], [], []
-            for log in self.logs.values():
-                rows = log.rows.get(table)
-                if rows:
-                    nodes.append(log.node_id)
-                    counts.append(len(rows))
-                    flat.extend(rows)   # copies pointers only
-                    rows.clear()
-            if nodes:
-                self._spill.inbox.put(_Chunk(table, nodes, counts, flat))
+            chunk = self._take(table)
+            if chunk is not None:
+                self._spill.inbox.put(chunk)
+
+    def _take(self, table: str) -> _Chunk | None:
+        """Empty every node's buffer of ``table`` into one chunk (copies pointers only)."""
+        nodes, counts, flat = [], [], []
+        for log in self.logs.values():
+            rows = log.rows.get(table)
+            if rows:
+                nodes.append(log.node_id)
+                counts.append(len(rows))
+                flat.extend(rows)
+                rows.clear()
+        return _Chunk(table, nodes, counts, flat) if nodes else None
 
     def close(self) -> None:
-        """Write everything out as per-node files; raise OSError naming what could not be written."""
-        self.flush()
+        """Write everything out as per-node files; raise OSError naming what could not be written.
+
+        Rows still buffered go straight from memory into the per-node files, not through the spill
+        file: a short run never touches the spill at all.
+        """
+        tails = {t: c for t in _ALL_TABLES if (c := self._take(t)) is not None}
         self._spill.finish()
         errors = [f"log writer failed: {e}" for e in self._spill.errors]
-        errors += _split(self._spill.root, self._spill.layout, self.root, self.logs)
+        errors += _split(self._spill.root, self._spill.layout, tails, self.root, self.logs)
         if not errors:
             shutil.rmtree(self._spill.root, ignore_errors=True)
         if errors:
             raise OSError("could not finish logs: " + "; ".join(errors))
 
 
-def _split(spill: Path, layout: dict[str, list[list[tuple[int, int, int]]]], root: Path,
-           logs: dict[int, NodeLog]) -> list[str]:
-    """Cut each spill file into ``<root>/<node>/<table>.parquet`` (every expected file, even empty)."""
+def _split(spill: Path, layout: dict[str, list[list[tuple[int, int, int]]]], tails: dict[str, _Chunk],
+           root: Path, logs: dict[int, NodeLog]) -> list[str]:
+    """Cut spill files and buffered tails into ``<root>/<node>/<table>.parquet`` (every expected file)."""
     errors: list[str] = []
     with ThreadPoolExecutor(max_workers=2) as pool:
         for table in _ALL_TABLES:
             owners = [log for log in logs.values() if table in log.tables]
             if not owners:
                 continue
+            pieces: dict[int, list[pa.Table]] = {}
             try:
-                pieces = _pieces(spill / f"{table}.parquet", layout.get(table, []))
+                _spilled(spill / f"{table}.parquet", layout.get(table, []), pieces)
+                if table in tails:
+                    _buffered(tails[table], pieces)
             except Exception as exc:  # noqa: BLE001 - keep going: other tables may be fine
-                errors.append(f"{table}: {exc}")
-                pieces = {}
+                errors.append(f"{table}: {type(exc).__name__}: {exc}")
             jobs = [pool.submit(_write_node_file, root / log.node / f"{table}.parquet", table,
                                 pieces.get(log.node_id, [])) for log in owners]
             errors += [str(e) for e in (j.exception() for j in jobs) if e is not None]
     return errors
 
 
-def _pieces(path: Path, groups: list[list[tuple[int, int, int]]]) -> dict[int, list[pa.Table]]:
+def _buffered(chunk: _Chunk, pieces: dict[int, list[pa.Table]]) -> None:
+    data = pa.Table.from_batches([batch(chunk.table, chunk.rows)])
+    offset = 0
+    for node, count in zip(chunk.nodes, chunk.counts, strict=True):
+        pieces.setdefault(node, []).append(data.slice(offset, count))
+        offset += count
+
+
+def _spilled(path: Path, groups: list[list[tuple[int, int, int]]], pieces: dict[int, list[pa.Table]]) -> None:
     if not groups:
-        return {}
-    pieces: dict[int, list[pa.Table]] = {}
+        return
     data = pq.ParquetFile(path)
     for index, spans in enumerate(groups):
         group = data.read_row_group(index).drop_columns(["node"])
         for node, offset, count in spans:
             pieces.setdefault(node, []).append(group.slice(offset, count))
-    return pieces
 
 
 def _write_node_file(path: Path, table: str, pieces: list[pa.Table]) -> None:

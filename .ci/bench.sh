@@ -9,7 +9,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 PYTHON=${PYTHON:-python3}
 STORAGE=file://tests/bench/baseline
-ARGS=(tests/bench/test_bench_scale.py -q -p no:cacheprovider --benchmark-enable --benchmark-storage="$STORAGE"
+ARGS=(tests/bench/test_bench_scale.py -q -p no:cacheprovider -m slow --benchmark-enable --benchmark-storage="$STORAGE"
       --benchmark-columns=min,mean,max,rounds)
 if [[ "${1:-}" == "--update-baseline" ]]; then
   rm -rf tests/bench/baseline

@@ -45,8 +45,12 @@ def check(cfg: DictConfig) -> Mission:
 
 def _topology(cfg: DictConfig, m: Mission) -> None:
     from_mission = cfg.topology.kind == "mission" and bool(m.superiors)
+    kind = cfg.topology.kind
     where = (f"mission.file {cfg.mission.file}: drone_config.superiors" if from_mission and cfg.mission.file
-             else "mission.superiors" if from_mission else f"topology ({cfg.topology.kind})")
+             else "mission.superiors" if from_mission
+             else "topology.superiors" if kind == "explicit"
+             else "topology.leader" if kind == "leader_follower"
+             else "topology.branching" if kind == "tree" else f"topology.kind={kind}")
     try:
         build.topology_of(cfg, m)
     except TopologyError as exc:

@@ -105,8 +105,7 @@ def from_parts(name: str, positions: Mapping, superiors: Mapping, values: Mappin
             sups[d] = int(sup)
         except (TypeError, ValueError):
             raise MissionError(f"{where}.superiors[{d}] must be a drone id or -1 (ground), got {sup!r}") from None
-    if not (isinstance(max_sim_time_s, int | float) and math.isfinite(max_sim_time_s) and max_sim_time_s > 0):
-        raise MissionError(f"mission.max_sim_time_s must be > 0, got {max_sim_time_s!r}")
+
     vals = {}
     for k, v in _int_keys(values, f"{where}.values").items():
         try:
@@ -178,6 +177,8 @@ def load_legacy(path: str | Path, max_sim_time_s: float, obstacles: list,
 def load(cfg: DictConfig, rng: np.random.Generator | None = None) -> Mission:
     """The mission of a run config's ``mission`` group (``rng`` feeds its generator, if any)."""
     m = cfg.mission
+    if not (math.isfinite(m.max_sim_time_s) and m.max_sim_time_s > 0):
+        raise MissionError(f"mission.max_sim_time_s must be > 0, got {m.max_sim_time_s!r}")
     obstacles = OmegaConf.to_container(m.obstacles, resolve=True)
     if m.file:
         mission = load_legacy(m.file, m.max_sim_time_s, obstacles, m.min_spawn_separation_m)

@@ -5,6 +5,11 @@ A run directory (see :mod:`swarmbox.record.schema`) is ``run.json`` + ``config.y
 = i) and keeps every schema column; a missing or unreadable file becomes an empty table plus a line in
 ``RunData.problems`` rather than an exception. Only a missing or unreadable ``run.json`` is fatal
 (:class:`RunLoadError`): without it the directory is not a run.
+
+A run is *incomplete* (``RunData.incomplete``, with the reasons in ``problems``) when any expected
+table is unreadable, a table the metrics need is missing, or a ``.partial`` file shows that writing
+never finished; the analyzer refuses such a run unless told otherwise, and a sweep lists it as
+skipped. :func:`find_unfinished` finds the directories of runs that never wrote ``run.json``.
 """
 
 from __future__ import annotations
@@ -185,6 +190,8 @@ def load_run(run_dir: str | Path) -> RunData:
             frame = read_table(path, table, nid, problems)
             if frame is not None:
                 parts[table].append(frame)
+            elif path.exists():
+                incomplete = True    # unreadable (truncated, corrupt): the record is damaged
             elif table in EXPECTED[kind]:
                 if not any(p.startswith(f"{ndir.name}/{table}") for p in problems):
                     problems.append(f"{ndir.name}/{table}.parquet missing")
@@ -192,6 +199,9 @@ def load_run(run_dir: str | Path) -> RunData:
     if GROUND not in dirs:
         incomplete = True
         problems.append("no ground logs")
+    for partial in sorted((run_dir / "logs").rglob("*.partial")):
+        incomplete = True
+        problems.append(f"{partial.relative_to(run_dir)}: writing never finished")
     tables = {t: _concat(t, frames) for t, frames in parts.items()}
     return RunData(run_dir, manifest, config, tables, sorted(dirs), problems, incomplete)
 
@@ -201,6 +211,15 @@ def _concat(table: str, frames: list[pd.DataFrame]) -> pd.DataFrame:
     if not frames:
         return empty_table(table)
     return pd.concat(frames, ignore_index=True)
+
+
+def find_unfinished(root: str | Path) -> list[Path]:
+    """Directories at or below ``root`` that hold a run's files (config.yaml or logs/) but no run.json:
+    runs that were killed, or still run."""
+    root = Path(root)
+    marks = [*root.rglob("config.yaml"), *(p for p in root.rglob("logs") if p.is_dir())]
+    dirs = {p.parent for p in marks}
+    return sorted(d for d in dirs if not (d / "run.json").is_file())
 
 
 def find_runs(root: str | Path) -> list[Path]:

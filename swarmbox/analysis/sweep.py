@@ -31,7 +31,7 @@ import pandas as pd
 from scipy import stats
 
 from swarmbox.analysis.catalog import Direction, direction_of, unit_of
-from swarmbox.analysis.load import RunLoadError, find_runs, load_run
+from swarmbox.analysis.load import RunLoadError, find_runs, find_unfinished, load_run
 from swarmbox.analysis.report import AnalysisOptions, analyze_run
 
 log = logging.getLogger(__name__)
@@ -68,6 +68,10 @@ class SweepResult:
 def collect_runs(root: Path, opts: AnalysisOptions) -> tuple[pd.DataFrame, pd.DataFrame, dict, list[str]]:
     """Analyze every run below ``root``: (runs table, problems table, declared directions, choice columns)."""
     rows, problems, directions, choices = [], [], {}, []
+    for run_dir in find_unfinished(root):
+        rel = str(run_dir.relative_to(root)) if run_dir != root else "."
+        problems.append({"run": rel, "severity": "skipped",
+                         "problem": "no run.json: the run was killed or has not finished"})
     for run_dir in find_runs(root):
         rel = str(run_dir.relative_to(root)) if run_dir != root else "."
         try:
@@ -97,8 +101,8 @@ def collect_runs(root: Path, opts: AnalysisOptions) -> tuple[pd.DataFrame, pd.Da
 
 
 def _skip_reason(run) -> str:
-    if run.status == "failed":
-        return f"run failed: {run.manifest.get('reason') or 'no reason given'}"
+    if run.status in ("failed", "interrupted"):
+        return f"run {run.status}: {run.manifest.get('reason') or 'no reason given'}"
     if run.incomplete:
         return "incomplete logs: " + "; ".join(run.problems)
     return ""

@@ -34,7 +34,9 @@ from swarmbox.faults import FaultConfigError, describe
 from swarmbox.record.schema import SCHEMA_VERSION, node_name
 from swarmbox.record.writer import Recorder
 from swarmbox.run import build, checks, interrupt
+from swarmbox.run.build import ConfigError
 from swarmbox.run.config import GROUPS
+from swarmbox.run.tally import SafetyTally
 from swarmbox.run.watchdog import HookTimeout, HookWatchdog
 
 _PROJECT_ROOT = Path(__file__).resolve().parents[2]
@@ -135,8 +137,14 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
     m = checks.check(cfg)
     existed = run_dir.exists()
     logs_existed = (run_dir / "logs").exists()
-    run_dir.mkdir(parents=True, exist_ok=True)
-    write_atomic(run_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        write_atomic(run_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
+    except OSError as exc:
+        if run_dir.is_dir():
+            _discard(run_dir, existed, logs_existed)
+        raise ConfigError(f"run directory {run_dir} (run.out_dir / hydra.run.dir) cannot be written: "
+                          f"{exc.strerror or exc}") from None
     manifest: dict[str, Any] = {
         "schema": SCHEMA_VERSION, "status": "failed", "reason": "", "traceback": None,
         "seed": int(cfg.seed), "choices": choices, "overrides": overrides,
@@ -157,6 +165,7 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
             if prepare is not None:
                 prepare(swarm)
             dog = _watchdog(cfg, swarm)
+            tally = SafetyTally(swarm.backend)
             label = f"{choices.get('algo', '?')} seed={cfg.seed}"
             progress = _progress(label) if cfg.run.progress else None
 
@@ -166,9 +175,9 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
                     progress(s)
 
             outcome = swarm.run(m.max_sim_time_s, speed=cfg.run.speed, progress=tick_hook)
-        manifest.update(status=outcome.status, reason=outcome.reason, sim_time_s=outcome.sim_time_s,
-                        wall_time_s=outcome.wall_time_s, ticks=outcome.ticks,
-                        real_time_factor=outcome.real_time_factor)
+        manifest.update(status=outcome.status, reason="; ".join(filter(None, [outcome.reason, tally.summary()])),
+                        sim_time_s=outcome.sim_time_s, wall_time_s=outcome.wall_time_s, ticks=outcome.ticks,
+                        real_time_factor=outcome.real_time_factor, safety=tally.record())
     except checks.INPUT_ERRORS:   # found only while building (e.g. a fault the backend cannot express)
         discard = True
         if swarm is not None:

@@ -48,26 +48,34 @@ def _ids(ids: list[int]) -> str:
     return f"drone {ids[0]}" if len(ids) == 1 else f"drones {ids}"
 
 
-def drones_summary(swarm: Any) -> str:
+def drones_summary(swarm: Any, *, abnormal_only: bool = False) -> str:
     """Each drone's end state, grouped: e.g. ``drone 2 link lost (ABORT: link to the autopilot lost)``."""
     groups: dict[str, list[int]] = {}
     for agent in swarm.agents:
-        what = {"down": "landed and disarmed"}.get(drone_state(agent), drone_state(agent))
+        state = drone_state(agent)
+        what = {"down": "landed and disarmed"}.get(state, state)
         if agent.stage is Stage.ABORT and agent.reason:
             what += f" (ABORT: {agent.reason})"
+        elif abnormal_only and state == "down":
+            continue
         groups.setdefault(what, []).append(agent.node_id)
     return "; ".join(f"{_ids(ids)} {what}" for what, ids in groups.items())
 
 
 def outcome(swarm: Any, max_sim_time_s: float, settled: bool) -> tuple[str, str]:
-    """``(status, reason)`` of a run that stopped: ``ok`` or ``aborted``, with the real cause."""
+    """``(status, reason)`` of a run that stopped: ``ok`` or ``aborted``, with the real cause.
+
+    ``ok``: the ground reached TERMINATION (the mission completed), even if some drones were lost
+    or aborted on the way (named in the reason).
+    """
     g = swarm.ground
     t = swarm.time.t_s
-    if swarm.done() and g.stage is not Stage.ABORT:
+    if (swarm.done() or settled) and g.stage is Stage.TERMINATION:   # the mission completed
         lost = sorted(i for i, inf in g.inferiors.items() if not inf.alive)
         aborted = sorted(a.node_id for a in swarm.agents if a.stage is Stage.ABORT)
         return "ok", "; ".join(filter(None, [f"lost drones {lost}" if lost else "",
-                                             f"drones {aborted} aborted" if aborted else ""]))
+                                             f"drones {aborted} aborted" if aborted else "",
+                                             drones_summary(swarm, abnormal_only=True)]))
     if g.stage is Stage.ABORT:
         head = f"ground ABORT: {g.reason}"
     elif settled:

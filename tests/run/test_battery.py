@@ -224,3 +224,23 @@ def test_no_vehicle_at_the_configured_port_fails_naming_it(tmp_path):
     assert f"udpin:127.0.0.1:{port}" in proc.stderr and "not heard" in proc.stderr
     assert "Traceback" not in proc.stderr
     assert manifest["status"] == "failed" and manifest["ticks"] == 0
+
+
+def test_vehicle_link_lost_ends_the_run_when_the_others_are_down_naming_the_drone(run):
+    """Case 19 on the runner side: a vehicle falls silent mid-mission (its mavsim process is killed)."""
+    manifest, d = run("algo=hover", "mission=hover", "algo.params.hover_s=6", "run.speed=4", "backend=mavsim",
+                      "backend.link_timeout_s=1", "mission.max_sim_time_s=200",
+                      prepare=lambda s: s.schedule(5.0, lambda sw: sw.backend.processes[1].kill()))
+    assert "drone 1 link lost" in manifest["reason"], manifest["reason"]
+    assert "max_sim_time_s" not in manifest["reason"]
+    assert manifest["sim_time_s"] < 60, manifest["reason"]
+    for i in (0, 2, 3):
+        last = pd.read_parquet(d / "logs" / f"drone_{i}" / "state.parquet").iloc[-1]
+        assert last["landed"] and not last["armed"]
+
+
+def test_ground_link_cut_ends_when_all_drones_are_down_with_the_cause(run):
+    manifest, d = run("algo=hover", "mission=hover", "algo.params.hover_s=30", "fault=link_cut",
+                      "fault.targets=[-1]", "fault.onset_s=10", "mission.max_sim_time_s=300")
+    assert manifest["status"] == "aborted" and manifest["sim_time_s"] < 60
+    assert "drones [0, 1, 2, 3] landed and disarmed (ABORT: lost superior -1" in manifest["reason"]

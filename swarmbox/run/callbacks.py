@@ -23,6 +23,9 @@ class SweepSummary(Callback):
     interrupted, else 2 if a job's config was refused, else 1 if a run failed, else 0.
     """
 
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        sweep_state.entered()   # the config composed: later exit codes are the sweep's, not bad input
+
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         root = Path(config.hydra.sweep.dir)
         runs, unreadable = [], []

@@ -82,6 +82,8 @@ def main(cfg: DictConfig) -> str:
             print(manifest["traceback"], file=sys.stderr)
         else:
             print(f"  traceback: {run_dir / 'run.json'} (or rerun with --verbose)", file=sys.stderr)
+    if status == "interrupted":
+        interrupt.release()
     if not multirun:
         if status == "interrupted":
             sys.exit(interrupt.exit_code())

@@ -60,22 +60,3 @@ class SweepSummary(Callback):
                 or (1 if any(m.get("status") == "failed" for _, m in runs) or unreadable else 0))
         if code:
             sys.exit(code)
-
-
-class AnalyzeSweep(Callback):
-    """After a multirun: tables and figures for the whole sweep (``swarmbox.analysis``).
-
-    The analysis library is imported only here, at the end of a sweep, so runs themselves never
-    load pandas or matplotlib. Switch it off with ``~hydra.callbacks.analyze`` on the command line.
-    Skipped after an interrupt (the user asked to stop; ``python -m swarmbox.analyze`` still works).
-    """
-
-    def __init__(self, group_by: list[str] | tuple[str, ...] = ("algo",), figures: bool = True) -> None:
-        self.group_by, self.figures = tuple(group_by), figures
-
-    def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
-        if interrupt.requested():
-            return
-        from swarmbox.analysis.callback import AnalyzeSweepCallback
-
-        AnalyzeSweepCallback(group_by=self.group_by, figures=self.figures).on_multirun_end(config, **kwargs)

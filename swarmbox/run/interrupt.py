@@ -10,6 +10,7 @@ signal`` (130 for Ctrl-C).
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
 from collections.abc import Iterator
@@ -26,12 +27,14 @@ class RunInterrupted(BaseException):
 
 
 _state: dict[str, Any] = {"signum": None, "armed": False, "installed": False}
+ENV = "SWARMBOX_INTERRUPTED"
 
 
 def _handler(signum: int, _frame: Any) -> None:
     if _state["signum"] is not None:
         return   # already stopping: let the interrupted run finish writing its files
     _state["signum"] = signum
+    os.environ[ENV] = signal.Signals(signum).name   # read by the end-of-sweep analysis: skip it
     if _state["armed"]:
         _state["armed"] = False
         raise RunInterrupted(signum)
@@ -56,6 +59,13 @@ def armed() -> Iterator[None]:
         yield
     finally:
         _state["armed"] = False
+
+
+def release() -> None:
+    """Once the interrupted run's files are written: a further signal stops the process at once."""
+    if _state["installed"] and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def requested() -> int | None:

@@ -76,7 +76,8 @@ def main(cfg: DictConfig) -> str:
         if run_dir != hydra_dir:
             _drop_if_empty(hydra_dir)
     status = manifest["status"]
-    print(summary_line(manifest, run_dir), flush=True, file=sys.stdout if status in ("ok", "aborted") else sys.stderr)
+    stream = sys.stdout if status in ("ok", "aborted") else sys.stderr
+    print(summary_line(manifest, run_dir), flush=True, file=stream)
     if manifest["traceback"]:
         if verbose():
             print(manifest["traceback"], file=sys.stderr)

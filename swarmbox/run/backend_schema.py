@@ -88,8 +88,9 @@ Px4BackendConfig = _schema("px4", "swarmbox.hal.px4.backend.Px4Backend", _px4_fi
 # this schema keeps px4.yaml's values and only adds (and types) the mavsim keys.
 MavsimBackendConfig = _schema(
     "mavsim", "swarmbox.hal.mavsim.backend.MavsimBackend",
-    [(n, t, dataclasses.field(default=MISSING)) for n, t, _ in _px4_fields()] + [(n, t, d) if n != "sim" else (n, Optional[_SimFields], dataclasses.field(default=None))  # noqa: UP045
-     for n, t, d in _fields(MavsimOptions)],
+    [(n, t, dataclasses.field(default=MISSING)) for n, t, _ in _px4_fields()]
+    + [(n, t, d) if n != "sim" else (n, Optional[_SimFields], dataclasses.field(default=None))  # noqa: UP045
+       for n, t, d in _fields(MavsimOptions)],
     "Schema of ``backend=mavsim``: the px4 bridge's fields plus MavsimOptions (``sim``: SimParams keys).",
     base=Px4BackendConfig)
 

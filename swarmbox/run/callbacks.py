@@ -48,7 +48,8 @@ class SweepSummary(Callback):
             write_atomic(root / "sweep.json", json.dumps(summary, indent=2))
         text = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()))
         extra = "".join([f"; {len(invalid)} refused" if invalid else "",
-                         f"; {len(not_started)} not started ({interrupt.signal_name()})" if not_started else ""])
+                         f"; {len(not_started)} not started ({interrupt.signal_name()})"
+                         if not_started else ""])
         print(f"sweep {root}: {len(runs)} runs ({text}){extra}", flush=True)
         for d, m in runs:
             if m.get("status") in ("failed", "interrupted"):

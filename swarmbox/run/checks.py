@@ -98,7 +98,8 @@ def _network(n: DictConfig, m: Mission) -> None:
     for i, link in enumerate(n.links):
         for end in ("src", "dst"):
             if link[end] not in known:
-                raise ConfigError(f"network.links[{i}].{end}: unknown node {link[end]} (known: {sorted(known)})")
+                raise ConfigError(f"network.links[{i}].{end}: unknown node {link[end]} "
+                                  f"(known: {sorted(known)})")
         _link(f"network.links[{i}].", link.latency_ms, link.jitter_ms, link.loss_prob)
 
 

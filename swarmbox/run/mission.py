@@ -104,7 +104,8 @@ def from_parts(name: str, positions: Mapping, superiors: Mapping, values: Mappin
         try:
             sups[d] = int(sup)
         except (TypeError, ValueError):
-            raise MissionError(f"{where}.superiors[{d}] must be a drone id or -1 (ground), got {sup!r}") from None
+            raise MissionError(f"{where}.superiors[{d}] must be a drone id or -1 (ground), "
+                               f"got {sup!r}") from None
 
     vals = {}
     for k, v in _int_keys(values, f"{where}.values").items():

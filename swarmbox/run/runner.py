@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import platform
+import shutil
 import subprocess
 import sys
 import time
@@ -175,7 +175,8 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
                     progress(s)
 
             outcome = swarm.run(m.max_sim_time_s, speed=cfg.run.speed, progress=tick_hook)
-        manifest.update(status=outcome.status, reason="; ".join(filter(None, [outcome.reason, tally.summary()])),
+        reason = "; ".join(filter(None, [outcome.reason, tally.summary()]))
+        manifest.update(status=outcome.status, reason=reason,
                         sim_time_s=outcome.sim_time_s, wall_time_s=outcome.wall_time_s, ticks=outcome.ticks,
                         real_time_factor=outcome.real_time_factor, safety=tally.record())
     except checks.INPUT_ERRORS:   # found only while building (e.g. a fault the backend cannot express)

@@ -28,10 +28,11 @@ class SafetyTally:
         backend.drain_events = counted
 
     def record(self) -> dict[str, dict[str, int]]:
-        return {name: {str(d): n for d, n in sorted(per.items())} for name, per in sorted(self.counts.items())}
+        return {name: {str(d): n for d, n in sorted(per.items())}
+                for name, per in sorted(self.counts.items())}
 
     def summary(self) -> str:
-        """E.g. ``safety: drones [0, 1] setpoint_refused 80 times (position setpoint more than 1000 m away)``."""
+        """E.g. ``safety: drones [0, 1] setpoint_refused 80 times (first: non-finite setpoint)``."""
         parts = []
         for name, per in sorted(self.counts.items()):
             ids = sorted(per)

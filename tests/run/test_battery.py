@@ -22,7 +22,7 @@ import pytest
 from tests.conftest import ROOT
 
 HOVER = ("algo=hover", "mission=hover", "algo.params.hover_s=1", "run.progress=false")
-LINE = "{0:[0,0],1:[5,0],2:[10,0],3:[15,0]}"
+SAME_POINT = "{0:[0,0],1:[0,0],2:[10,0],3:[15,0]}"
 
 
 def swarmbox(tmp: Path, *args: str, env: dict | None = None) -> subprocess.CompletedProcess:
@@ -58,10 +58,12 @@ CONFIG_CASES = [   # (case id, overrides, text the one-line message must contain
     ("5-algo", ["algo=nosuch"], "algo"),
     ("6-cycle", ["topology=explicit", "topology.superiors={0:1,1:0,2:-1,3:-1}"], "topology.superiors: cycle"),
     ("6-self", ["topology=explicit", "topology.superiors={0:0,1:-1,2:-1,3:-1}"], "its own superior"),
-    ("6-out-of-range", ["topology=explicit", "topology.superiors={0:-1,1:9,2:-1,3:-1}"], "unknown superior 9"),
-    ("6-missing-drone", ["topology=explicit", "topology.superiors={0:-1,1:0,2:0}"], "drones [3] have no superior"),
+    ("6-out-of-range", ["topology=explicit", "topology.superiors={0:-1,1:9,2:-1,3:-1}"],
+     "unknown superior 9"),
+    ("6-missing-drone", ["topology=explicit", "topology.superiors={0:-1,1:0,2:0}"],
+     "drones [3] have no superior"),
     ("7-size", ["mission.swarm_size=5"], "swarm_size 5 disagrees"),
-    ("7-same-point", ["mission.initial_positions=null", "mission.initial_positions={0:[0,0],1:[0,0],2:[10,0],3:[15,0]}"],
+    ("7-same-point", ["mission.initial_positions=null", f"mission.initial_positions={SAME_POINT}"],
      "drones 0 and 1 start 0.00 m apart"),
     ("7-duplicate-id", ["mission.file=@duplicate_id"], "key 1 is given twice"),
     ("8-no-mission-config", ["mission.file=@no_mission_config"], "mission_config"),
@@ -144,8 +146,8 @@ def test_failing_hook_fails_the_run_truthfully(tmp_path, case, algo, extra, name
 
 
 def test_verbose_switch_prints_the_traceback(tmp_path):
-    proc = swarmbox(tmp_path, f"run.out_dir={tmp_path / 'r'}", "algo.drone._target_=tests.run.algos.TupleDrone",
-                    "--verbose")
+    proc = swarmbox(tmp_path, f"run.out_dir={tmp_path / 'r'}",
+                    "algo.drone._target_=tests.run.algos.TupleDrone", "--verbose")
     assert proc.returncode == 1 and "Traceback (most recent call last)" in proc.stderr
 
 
@@ -219,7 +221,8 @@ def test_no_vehicle_at_the_configured_port_fails_naming_it(tmp_path):
         port = s.getsockname()[1]
     proc, out, manifest = _runtime(tmp_path, "backend=px4", "mission.swarm_size=1",
                                    "mission.initial_positions=null", "mission.initial_positions={0:[0,0]}",
-                                   f"backend.connections=[udpin:127.0.0.1:{port}]", "backend.connect_timeout_s=1")
+                                   f"backend.connections=[udpin:127.0.0.1:{port}]",
+                                   "backend.connect_timeout_s=1")
     assert proc.returncode == 1
     assert f"udpin:127.0.0.1:{port}" in proc.stderr and "not heard" in proc.stderr
     assert "Traceback" not in proc.stderr

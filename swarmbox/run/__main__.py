@@ -17,6 +17,7 @@ Exit codes: 0 ok or aborted (a truthful record of the mission), 1 a run failed, 
 
 from __future__ import annotations
 
+import io
 import os
 import sys
 from pathlib import Path
@@ -93,20 +94,45 @@ def main(cfg: DictConfig) -> str:
     return status
 
 
+def one_line(text: str) -> str:
+    """Hydra's multi-line composition error as one line (its key and cause kept)."""
+    text = text.split("Config search path:")[0]
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    keep = [ln for ln in lines if not ln.startswith(("Set the environment variable", "object_type="))]
+    return "; ".join(keep).replace(":;", ":")
+
+
 def cli() -> None:
-    """Entry point: ``--verbose`` (not a Hydra option) turns on tracebacks on the terminal."""
+    """Entry point: ``--verbose`` (not a Hydra option) turns on tracebacks on the terminal.
+
+    Until the config has composed, stderr is held: if Hydra refuses the config (unknown key, wrong
+    type, missing group option) its message is printed as one line and the exit code is 2.
+    """
     if "--verbose" in sys.argv:
         sys.argv.remove("--verbose")
         os.environ["SWARMBOX_VERBOSE"] = "1"
     interrupt.install()
+    real, held = sys.stderr, io.StringIO()
+
+    def release() -> None:
+        if sys.stderr is held:
+            sys.stderr = real
+            real.write(held.getvalue())
+
+    if not verbose():
+        sys.stderr = held
+        sweep_state.on_enter(release)
     try:
         main()
     except SystemExit as exc:
-        # Hydra reports a config that does not compose (unknown key, wrong type, missing group
-        # option) itself and exits 1 before any job starts: that is bad input, exit 2.
         if exc.code == 1 and not sweep_state.any_entered():
+            sys.stderr = real
+            text = one_line(held.getvalue()) or "the config could not be composed"
+            print(f"error: {text} (nothing was run or written)", file=real, flush=True)
             sys.exit(EXIT_INPUT)
         raise
+    finally:
+        release()
 
 
 if __name__ == "__main__":

@@ -5,11 +5,21 @@ The basic launcher runs a sweep's jobs in this process, so the end-of-sweep summ
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 _state: dict[str, list] = {"entered": [], "not_started": [], "invalid": []}
+_on_enter: list[Callable[[], None]] = []
+
+
+def on_enter(fn: Callable[[], None]) -> None:
+    """Call ``fn`` once the config has composed (the first job or the sweep starts)."""
+    _on_enter.append(fn)
 
 
 def entered() -> None:
     _state["entered"].append(True)
+    while _on_enter:
+        _on_enter.pop()()
 
 
 def any_entered() -> bool:

@@ -97,6 +97,7 @@ def test_config_error_is_one_line_exit_2_and_writes_nothing(tmp_path, case, over
                                 [f"run.out_dir={out}"]), *args)
     assert proc.returncode == 2, proc.stderr
     assert named in proc.stderr, proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     assert "Traceback" not in proc.stderr
     assert not out.exists() and not (tmp_path / "hydra").exists()
     assert files(inputs) == before

@@ -161,7 +161,12 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
     started = time.perf_counter()
     try:
         with interrupt.armed():
-            swarm = build.build_swarm(cfg, m, recorder)
+            try:
+                swarm = build.build_swarm(cfg, m, recorder)
+            except checks.INPUT_ERRORS:   # found only while building (a fault the backend cannot express)
+                discard = True
+                _discard(run_dir, existed, logs_existed)
+                raise
             if prepare is not None:
                 prepare(swarm)
             dog = _watchdog(cfg, swarm)
@@ -179,12 +184,11 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         manifest.update(status=outcome.status, reason=reason,
                         sim_time_s=outcome.sim_time_s, wall_time_s=outcome.wall_time_s, ticks=outcome.ticks,
                         real_time_factor=outcome.real_time_factor, safety=tally.record())
-    except checks.INPUT_ERRORS:   # found only while building (e.g. a fault the backend cannot express)
-        discard = True
-        if swarm is not None:
-            swarm.backend.close()
-        _discard(run_dir, existed, logs_existed)
-        raise
+    except checks.INPUT_ERRORS as exc:
+        if discard:
+            raise
+        manifest.update(status="failed", reason=f"{type(exc).__name__}: {exc}",   # raised while flying
+                        traceback=traceback.format_exc())
     except interrupt.RunInterrupted as exc:
         manifest.update(status="interrupted", reason=f"{exc} at t={_t(swarm):.1f} s")
     except KeyboardInterrupt:     # no handler installed (programmatic use): record, then propagate

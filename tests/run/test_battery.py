@@ -248,3 +248,22 @@ def test_ground_link_cut_ends_when_all_drones_are_down_with_the_cause(run):
                       "fault.targets=[-1]", "fault.onset_s=10", "mission.max_sim_time_s=300")
     assert manifest["status"] == "aborted" and manifest["sim_time_s"] < 60
     assert "drones [0, 1, 2, 3] landed and disarmed (ABORT: lost superior -1" in manifest["reason"]
+
+
+def test_kill_9_leaves_no_finished_run_and_the_analyzer_names_the_directory(tmp_path):
+    out = tmp_path / "runs" / "killed"
+    cmd = [sys.executable, "-m", "swarmbox.run", "algo=hover", "mission=hover", "run.progress=false",
+           "algo.drone._target_=tests.run.algos.SlowDrone", "+algo.params.delay_s=0.002",
+           "algo.params.hover_s=60", "mission.max_sim_time_s=100", f"run.out_dir={out}",
+           f"hydra.run.dir={tmp_path / 'hydra'}"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    while not (out / "config.yaml").exists() and proc.poll() is None:
+        time.sleep(0.05)
+    time.sleep(0.5)
+    proc.kill()
+    proc.wait(timeout=30)
+    assert not (out / "run.json").exists()
+    assert all(p.name.endswith(".partial") for p in (out / "logs").rglob("*") if p.is_file())
+    analyze = subprocess.run([sys.executable, "-m", "swarmbox.analyze", str(tmp_path / "runs")], cwd=ROOT,
+                             capture_output=True, text=True, timeout=120)
+    assert analyze.returncode == 2 and f"skipped: {out}: no run.json" in analyze.stderr

@@ -77,7 +77,7 @@ def outcome(swarm: Any, max_sim_time_s: float, settled: bool) -> tuple[str, str]
                                              f"drones {aborted} aborted" if aborted else "",
                                              drones_summary(swarm, abnormal_only=True)]))
     if g.stage is Stage.ABORT:
-        head = f"ground ABORT: {g.reason}"
+        head = g.reason   # the ground's own cause first, then each drone's end state
     elif settled:
         head = f"every drone down or lost at t={t:.1f} s with the ground in {g.stage.name}"
     else:

@@ -7,6 +7,7 @@ Examples::
     python -m swarmbox.run -m algo=hover,formation 'seed=range(3)'
     python -m swarmbox.run -m hydra/launcher=joblib 'seed=range(20)'   # parallel, one job per core
     python -m swarmbox.run --verbose ...                      # tracebacks on the terminal too
+    python -m swarmbox.run -m 'seed=range(20)' hydra.sweep.dir=study run.resume=true  # resume a sweep
 
 One error path: a bad input prints one line naming the key or file and creates nothing; a run
 that fails prints one line with its reason and run directory (the traceback is in its run.json).
@@ -30,6 +31,7 @@ from omegaconf import DictConfig
 from swarmbox.run import interrupt, sweep_state
 from swarmbox.run.checks import INPUT_ERRORS
 from swarmbox.run.config import register
+from swarmbox.run.resume import ResumeMismatchError, finished_run
 from swarmbox.run.runner import RunExistsError, execute, run_choices, summary_line
 
 CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
@@ -63,12 +65,19 @@ def main(cfg: DictConfig) -> str:
         sweep_state.not_started(overrides)
         return "not started"
     choices = run_choices(cfg, hc.runtime.choices)
+    if hc.mode == RunMode.MULTIRUN:
+        cfg.run.progress = False   # the sweep's own progress speaks for its runs
     try:
+        manifest = finished_run(run_dir, overrides) if cfg.run.resume else None
+        if manifest is not None:
+            print(f"SKIP    {run_dir}: already finished ({manifest['status']}; run.resume=true)", flush=True)
+            return manifest["status"]
         manifest = execute(cfg, run_dir, choices, overrides)
-    except (RunExistsError, *INPUT_ERRORS) as exc:
+    except (RunExistsError, ResumeMismatchError, *INPUT_ERRORS) as exc:
         _drop_if_empty(hydra_dir)
-        print(f"error: {exc}" + ("" if isinstance(exc, RunExistsError) else " (nothing was run or written)"),
-              file=sys.stderr, flush=True)
+        refused = isinstance(exc, RunExistsError | ResumeMismatchError)
+        tail = "" if refused else " (nothing was run or written)"
+        print(f"error: {exc}{tail}", file=sys.stderr, flush=True)
         if not multirun:
             sys.exit(EXIT_INPUT)
         sweep_state.invalid(overrides, str(exc))

@@ -115,6 +115,7 @@ class RunConfig:
     # wall s one hook call may take before the run fails naming it; null: off. Always off when the
     # vehicles were not started by the run (px4 backend connecting to running vehicles: hardware).
     hook_timeout_s: Optional[float] = 10.0
+    resume: bool = False            # skip a run whose directory holds a finished run (ok/aborted)
 
 
 @dataclass

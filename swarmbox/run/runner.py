@@ -16,7 +16,6 @@ import os
 import platform
 import shutil
 import subprocess
-import sys
 import time
 import traceback
 from collections.abc import Callable
@@ -36,6 +35,7 @@ from swarmbox.record.writer import Recorder
 from swarmbox.run import build, checks, interrupt
 from swarmbox.run.build import ConfigError
 from swarmbox.run.config import GROUPS
+from swarmbox.run.progress import RunProgress
 from swarmbox.run.tally import SafetyTally
 from swarmbox.run.watchdog import HookTimeout, HookWatchdog
 
@@ -69,20 +69,6 @@ def _git_sha() -> str | None:
     except (OSError, subprocess.SubprocessError):
         return None
     return out.stdout.strip() or None
-
-
-def _progress(label: str):
-    last = [time.perf_counter()]
-
-    def report(swarm: Swarm) -> None:
-        now = time.perf_counter()
-        if now - last[0] >= 2.0:
-            last[0] = now
-            g = swarm.ground
-            _, alive = g.head_count()
-            print(f"[{label}] t={swarm.time.t_s:7.1f} s  ground {g.stage.name:<11}  "
-                  f"{alive}/{g.mission.swarm_size} drones alive", file=sys.stderr, flush=True)
-    return report
 
 
 def run_choices(cfg: DictConfig, hydra_choices: Any) -> dict[str, str]:
@@ -135,6 +121,8 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
     """
     _refuse_finished(run_dir)
     m = checks.check(cfg)
+    if cfg.mission.file:   # record the file's own mission, not the group it was loaded over
+        choices = {**choices, "mission": m.name}
     existed = run_dir.exists()
     logs_existed = (run_dir / "logs").exists()
     try:
@@ -155,7 +143,7 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         "started_at": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     recorder = Recorder(run_dir)
-    swarm = None
+    swarm = progress = None
     dog = None
     discard = False
     started = time.perf_counter()
@@ -172,7 +160,7 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
             dog = _watchdog(cfg, swarm)
             tally = SafetyTally(swarm.backend)
             label = f"{choices.get('algo', '?')} seed={cfg.seed}"
-            progress = _progress(label) if cfg.run.progress else None
+            progress = RunProgress(label, m.max_sim_time_s) if cfg.run.progress else None
 
             def tick_hook(s: Swarm) -> None:
                 recorder.maybe_flush()
@@ -202,6 +190,8 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
     finally:
         if dog is not None:
             dog.stop()
+        if progress is not None:
+            progress.close()
         if manifest["status"] in ("failed", "interrupted"):
             _reached(manifest, swarm, started)
         if not discard:

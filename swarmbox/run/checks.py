@@ -9,6 +9,7 @@ Only what needs the built swarm (e.g. a fault the backend cannot express) is che
 from __future__ import annotations
 
 import math
+from dataclasses import fields
 from typing import Any
 
 import numpy as np
@@ -125,8 +126,7 @@ def _backend(node: DictConfig) -> None:
         raise ConfigError(f"backend._target_: cannot import '{target}': {exc}") from exc
     try:
         if target.endswith("MavsimBackend"):
-            opts = {f: params.pop(f) for f in ("vehicle_tick_s", "offboard_loss", "sim") if f in params}
-            MavsimOptions(**{k: v for k, v in opts.items() if k != "sim"})
+            opts = {f.name: params.pop(f.name) for f in fields(MavsimOptions) if f.name in params}
             if opts.get("offboard_loss", "hold") not in ("hold", "land", "rtl"):
                 raise ValueError(f"offboard_loss must be hold, land or rtl, got {opts['offboard_loss']!r}")
             _positive("backend.vehicle_tick_s", opts.get("vehicle_tick_s", 0.01))

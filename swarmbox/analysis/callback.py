@@ -17,6 +17,7 @@ The callback never raises: an analysis error is logged and the multirun's own re
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -36,6 +37,9 @@ class AnalyzeSweepCallback(Callback):
         self.figures = figures
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
+        if os.environ.get("SWARMBOX_INTERRUPTED"):   # set by swarmbox.run on SIGINT / SIGTERM
+            log.warning("sweep interrupted (%s): analysis skipped", os.environ["SWARMBOX_INTERRUPTED"])
+            return
         try:
             from swarmbox.analysis.outputs import write_sweep
             from swarmbox.analysis.parallel import Reporter

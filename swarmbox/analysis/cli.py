@@ -17,14 +17,14 @@ from swarmbox.analysis.compare import (
     load_config,
     load_summary,
 )
-from swarmbox.analysis.load import RunLoadError, find_runs
+from swarmbox.analysis.load import RunLoadError, find_runs, find_unfinished, load_run
 from swarmbox.analysis.outputs import metrics_table, write_run, write_sweep
 from swarmbox.analysis.parallel import Reporter
 from swarmbox.analysis.report import AnalysisOptions, RunAnalysis, analyze_run
 from swarmbox.analysis.sweep import SweepOptions, analyze_sweep, summary_wide
 from swarmbox.analysis.tables import to_markdown
 
-EXIT_OK, EXIT_REGRESSION, EXIT_BAD_INPUT = 0, 1, 2
+EXIT_OK, EXIT_REGRESSION, EXIT_BAD_INPUT, EXIT_INCOMPLETE = 0, 1, 2, 3
 
 
 def _analyze_parser() -> argparse.ArgumentParser:
@@ -33,6 +33,8 @@ def _analyze_parser() -> argparse.ArgumentParser:
     p.add_argument("path", type=Path, help="a run directory (with run.json) or a directory of runs")
     p.add_argument("--out", type=Path, help="where tables/ and figures/ go (default: beside the data)")
     p.add_argument("--no-figures", action="store_true", help="write tables only")
+    p.add_argument("--allow-incomplete", action="store_true",
+                   help="analyze a run with damaged or missing tables anyway (flagged; exit 0)")
     run = p.add_argument_group("run analysis")
     run.add_argument("--window", type=float, default=0.5, help="timeline/anomaly window, s (0.5)")
     run.add_argument("--iqr-k", type=float, default=1.5, help="Tukey fence multiplier (1.5)")
@@ -83,16 +85,26 @@ def analyze_main(argv: list[str] | None = None) -> int:
     out = args.out or path
     if (path / "run.json").is_file():
         try:
-            analysis = analyze_run(path, _run_options(args))
+            run = load_run(path)
         except RunLoadError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return EXIT_BAD_INPUT
+        if run.incomplete:
+            why = "; ".join(run.problems)
+            if not args.allow_incomplete:
+                print(f"error: incomplete run {path}: {why} (--allow-incomplete analyzes it anyway)",
+                      file=sys.stderr)
+                return EXIT_INCOMPLETE
+            print(f"WARNING: incomplete run {path}: {why}; metrics cover only what could be read",
+                  file=sys.stderr)
+        analysis = analyze_run(run, _run_options(args))
         write_run(analysis, out, with_figures=not args.no_figures)
         _print_run(analysis)
         print(f"tables and figures written under {out}")
         return EXIT_OK
     if not find_runs(path):
-        print(f"error: no run directory (with run.json) at or below {path}", file=sys.stderr)
+        unfinished = "".join(f"\n  skipped: {d}: no run.json" for d in find_unfinished(path))
+        print(f"error: no run directory (with run.json) at or below {path}{unfinished}", file=sys.stderr)
         return EXIT_BAD_INPUT
     return _analyze_sweep(path, out, args)
 

@@ -5,6 +5,11 @@ A run directory (see :mod:`swarmbox.record.schema`) is ``run.json`` + ``config.y
 = i) and keeps every schema column; a missing or unreadable file becomes an empty table plus a line in
 ``RunData.problems`` rather than an exception. Only a missing or unreadable ``run.json`` is fatal
 (:class:`RunLoadError`): without it the directory is not a run.
+
+A run is *incomplete* (``RunData.incomplete``, with the reasons in ``problems``) when any expected
+table is unreadable, a table the metrics need is missing, or a ``.partial`` file shows that writing
+never finished; the analyzer refuses such a run unless told otherwise, and a sweep lists it as
+skipped. :func:`find_unfinished` finds the directories of runs that never wrote ``run.json``.
 """
 
 from __future__ import annotations
@@ -237,6 +242,8 @@ def load_run(run_dir: str | Path, columns: dict[str, tuple[str, ...]] | None = N
         problems.extend(note)
         if data is not None:
             parts[table].append(data)
+        elif (ndir / f"{table}.parquet").exists():
+            incomplete = True    # unreadable (truncated, corrupt): the record is damaged
         elif table in EXPECTED[node_kind(nid)]:
             if not any(p.startswith(f"{ndir.name}/{table}") for p in problems):
                 problems.append(f"{ndir.name}/{table}.parquet missing")
@@ -244,6 +251,9 @@ def load_run(run_dir: str | Path, columns: dict[str, tuple[str, ...]] | None = N
     if GROUND not in dirs:
         incomplete = True
         problems.append("no ground logs")
+    for partial in sorted((run_dir / "logs").rglob("*.partial")):
+        incomplete = True
+        problems.append(f"{partial.relative_to(run_dir)}: writing never finished")
     tables = {t: _concat(t, parts.pop(t), (columns or {}).get(t)) for t in list(parts)}
     return RunData(run_dir, manifest, config, tables, sorted(dirs), problems, incomplete)
 
@@ -254,6 +264,15 @@ def _concat(table: str, parts: list[pa.Table], columns: tuple[str, ...] | None =
         frame = empty_table(table)
         return frame if columns is None else frame[[c for c in frame.columns if c in columns or c == "node"]]
     return _to_frame(table, parts)
+
+
+def find_unfinished(root: str | Path) -> list[Path]:
+    """Directories at or below ``root`` that hold a run's files (config.yaml or logs/) but no run.json:
+    runs that were killed, or still run."""
+    root = Path(root)
+    marks = [*root.rglob("config.yaml"), *(p for p in root.rglob("logs") if p.is_dir())]
+    dirs = {p.parent for p in marks}
+    return sorted(d for d in dirs if not (d / "run.json").is_file())
 
 
 def find_runs(root: str | Path) -> list[Path]:

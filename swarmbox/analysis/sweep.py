@@ -38,7 +38,7 @@ import pandas as pd
 from scipy import stats
 
 from swarmbox.analysis.catalog import MACHINE_METRICS, Direction, direction_of, unit_of
-from swarmbox.analysis.load import RunLoadError, find_runs, load_run
+from swarmbox.analysis.load import RunLoadError, find_runs, find_unfinished, load_run
 from swarmbox.analysis.parallel import map_runs
 from swarmbox.analysis.report import AnalysisOptions, analyze_run
 
@@ -110,6 +110,10 @@ def collect_runs(root: Path, opts: AnalysisOptions, workers: int | None = None,
     Returns (runs table, problems table, declared directions, choice columns), in the runs' order.
     """
     rows, problems, directions, choices = [], [], {}, []
+    for run_dir in find_unfinished(root):
+        rel = str(run_dir.relative_to(root)) if run_dir != root else "."
+        problems.append({"run": rel, "severity": "skipped",
+                         "problem": "no run.json: the run was killed or has not finished"})
     for one in map_runs(_analyze_one, find_runs(root), root, opts, workers=workers, progress=progress):
         problems += one["problems"]
         directions |= one["directions"]
@@ -121,8 +125,8 @@ def collect_runs(root: Path, opts: AnalysisOptions, workers: int | None = None,
 
 
 def _skip_reason(run) -> str:
-    if run.status == "failed":
-        return f"run failed: {run.manifest.get('reason') or 'no reason given'}"
+    if run.status in ("failed", "interrupted"):
+        return f"run {run.status}: {run.manifest.get('reason') or 'no reason given'}"
     if run.incomplete:
         return "incomplete logs: " + "; ".join(run.problems)
     return ""

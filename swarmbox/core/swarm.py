@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 from swarmbox.core.agent import AgentNode
 from swarmbox.core.clock import TimeSource
+from swarmbox.core.ending import EndWatch, outcome
 from swarmbox.core.ground import GroundNode
-from swarmbox.core.stages import Stage
 
 
 @contextmanager
@@ -60,6 +60,7 @@ class Swarm:
         self._scheduled: list[tuple[float, int, Callable[[Swarm], None]]] = []
         self._order = itertools.count()   # ties run in the order they were scheduled
         self._by_id = {a.node_id: a for a in agents}
+        self.end_watch = EndWatch(ground.timing.lost_superior_ticks)   # every drone down or lost
 
     def schedule(self, at_s: float, action: Callable[[Swarm], None]) -> None:
         """Run ``action(swarm)`` at the first tick at or after true time ``at_s``."""
@@ -102,7 +103,7 @@ class Swarm:
 
     def run(self, max_sim_time_s: float, speed: float = 1.0,
             progress: Callable[[Swarm], None] | None = None) -> Outcome:
-        """Tick until every node has finished or ``max_sim_time_s`` passes.
+        """Tick until every node has finished, every drone is down or lost, or ``max_sim_time_s`` passes.
 
         The cyclic garbage collector is paused meanwhile: the loop allocates many small acyclic
         objects (messages, log rows) and full collections over the buffered logs cost more than
@@ -117,7 +118,11 @@ class Swarm:
         realtime = bool(getattr(self.backend, "realtime", False))
         max_ticks = int(round(max_sim_time_s / self.tick_s))
         report_every = max(1, int(round(1.0 / self.tick_s)))   # once per simulated second
+        settled = False
         while not self.done() and self.time.tick < max_ticks:
+            if self.end_watch.over(self):
+                settled = True
+                break
             self.step()
             if realtime:
                 ahead = self.time.t_s / speed - (wall.perf_counter() - start)
@@ -126,19 +131,5 @@ class Swarm:
             if progress is not None and self.time.tick % report_every == 0:
                 progress(self)
         elapsed = wall.perf_counter() - start
-        return self._outcome(elapsed, max_sim_time_s)
-
-    def _outcome(self, elapsed: float, max_sim_time_s: float) -> Outcome:
-        g = self.ground
-        if not self.done():
-            status, reason = "aborted", (f"max_sim_time_s {max_sim_time_s:g} reached with the ground in "
-                                         f"{g.stage.name}")
-        elif g.stage is Stage.ABORT:
-            status, reason = "aborted", g.reason
-        else:
-            status = "ok"
-            lost = sorted(i for i, inf in g.inferiors.items() if not inf.alive)
-            aborted = sorted(a.node_id for a in self.agents if a.stage is Stage.ABORT)
-            reason = "; ".join(filter(None, [f"lost drones {lost}" if lost else "",
-                                             f"drones {aborted} aborted" if aborted else ""]))
+        status, reason = outcome(self, max_sim_time_s, settled)
         return Outcome(status, reason, self.time.t_s, self.time.tick, elapsed)

@@ -103,6 +103,8 @@ def backend_of(cfg: DictConfig, mission: Mission, tick_s: float, seed: int, run_
     params = OmegaConf.to_container(cfg.backend, resolve=True)
     target = params.pop("_target_", None)
     params.pop("name", None)
+    if isinstance(params.get("sim"), dict):   # typed mavsim ``sim`` node: unset keys are None
+        params["sim"] = {k: v for k, v in params["sim"].items() if v is not None}
     if not target:
         raise ConfigError("backend: no _target_ (the backend class) given")
     s = cfg.run.safety

@@ -1,4 +1,4 @@
-"""Hydra callbacks: a closing summary of every sweep (and a non-zero exit if a run failed)."""
+"""Hydra callbacks: a closing summary of every sweep (and a non-zero exit if a run did not succeed)."""
 
 from __future__ import annotations
 
@@ -11,27 +11,53 @@ from typing import Any
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
+from swarmbox.run import interrupt, sweep_state
+from swarmbox.run.runner import write_atomic
+
 
 class SweepSummary(Callback):
-    """After a multirun: count statuses from each run's ``run.json``; exit 1 if any run failed.
+    """After a multirun: count statuses from each run's ``run.json``, write ``sweep.json``, print it.
 
-    The other runs of the sweep always run to the end; only the process exit code reports failures.
+    The other runs of a sweep always run to the end, except after SIGINT / SIGTERM: then the run in
+    progress is finished as ``interrupted`` and no further job starts. Exit code: 128+signal if
+    interrupted, else 2 if a job's config was refused, else 1 if a run failed, else 0.
     """
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        sweep_state.entered()   # the config composed: later exit codes are the sweep's, not bad input
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         root = Path(config.hydra.sweep.dir)
-        manifests = []
-        for path in sorted(root.glob("*/run.json")):
+        runs, unreadable = [], []
+        for path in sorted(root.glob("*/run.json"), key=lambda p: (len(p.parent.name), p.parent.name)):
             try:
-                manifests.append((path.parent, json.loads(path.read_text())))
+                runs.append((path.parent, json.loads(path.read_text())))
             except (OSError, ValueError) as exc:
-                print(f"unreadable {path}: {exc}", file=sys.stderr)
-        counts = Counter(m.get("status", "?") for _, m in manifests)
-        summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()))
-        print(f"sweep {root}: {len(manifests)} runs ({summary})", flush=True)
-        failed = [(d, m) for d, m in manifests if m.get("status") == "failed"]
-        for d, m in failed:
-            print(f"  failed: {d}: {m.get('reason')}", file=sys.stderr)
-        if failed:
-            sys.exit(1)
-
+                unreadable.append(f"{path}: {exc}")
+        counts = Counter(m.get("status", "?") for _, m in runs)
+        not_started, invalid = sweep_state.jobs_not_started(), sweep_state.jobs_invalid()
+        summary = {
+            "sweep_dir": str(root), "counts": dict(sorted(counts.items())),
+            "runs": [{"dir": d.name, "status": m.get("status"), "reason": m.get("reason"),
+                      "sim_time_s": m.get("sim_time_s"), "ticks": m.get("ticks")} for d, m in runs],
+            "invalid": [{"overrides": o, "reason": r} for o, r in invalid],
+            "not_started": not_started, "unreadable": unreadable,
+            "interrupted_by": interrupt.signal_name() or None,
+        }
+        if root.is_dir():
+            write_atomic(root / "sweep.json", json.dumps(summary, indent=2))
+        text = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()))
+        extra = "".join([f"; {len(invalid)} refused" if invalid else "",
+                         f"; {len(not_started)} not started ({interrupt.signal_name()})"
+                         if not_started else ""])
+        print(f"sweep {root}: {len(runs)} runs ({text}){extra}", flush=True)
+        for d, m in runs:
+            if m.get("status") in ("failed", "interrupted"):
+                print(f"  {m['status']}: {d}: {m.get('reason')} (t={m.get('sim_time_s', 0):.1f} s)",
+                      file=sys.stderr)
+        for line in unreadable:
+            print(f"  unreadable: {line}", file=sys.stderr)
+        code = (interrupt.exit_code() or (2 if invalid else 0)
+                or (1 if any(m.get("status") == "failed" for _, m in runs) or unreadable else 0))
+        if code:
+            sys.exit(code)

@@ -2,7 +2,8 @@
 
 Registered in Hydra's ConfigStore as ``base_config`` (the root config's first default), so a
 misspelt key or a wrong type in any group fails before the run starts, with a message that names
-the key. ``backend`` stays free-form: each backend's constructor names any key it does not know.
+the key. Each backend config file starts from its own schema (:mod:`swarmbox.run.backend_schema`,
+generated from the backend's parameter dataclass), so backend keys are typed too.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
 from swarmbox.faults.schema import FaultConfig  # generated from the fault models' parameters
+from swarmbox.run import backend_schema
 
 GROUPS = ("algo", "mission", "topology", "backend", "network", "fault")
 
@@ -42,6 +44,7 @@ class MissionConfig:
     generator: Optional[Any] = None
     obstacles: list[Any] = field(default_factory=list)     # static obstacles for the simulator
     max_sim_time_s: float = 900.0   # hard stop of the run (s of simulated time)
+    min_spawn_separation_m: float = 1.0   # initial positions closer than this are refused
 
 
 @dataclass
@@ -109,6 +112,9 @@ class RunConfig:
     speed: float = 1.0              # real-time backends: wall-clock pacing factor (SITL speed-up)
     progress: bool = True           # progress lines on stderr for long runs
     out_dir: Optional[str] = None   # default: Hydra's output directory
+    # wall s one hook call may take before the run fails naming it; null: off. Always off when the
+    # vehicles were not started by the run (px4 backend connecting to running vehicles: hardware).
+    hook_timeout_s: Optional[float] = 10.0
     resume: bool = False            # skip a run whose directory holds a finished run (ok/aborted)
 
 
@@ -127,3 +133,4 @@ class SwarmConfig:
 def register() -> None:
     cs = ConfigStore.instance()
     cs.store(name="base_config", node=SwarmConfig)
+    backend_schema.register(cs)

@@ -1,9 +1,12 @@
-"""Execute one run: build it, tick it to the end, and leave a complete run directory behind.
+"""Execute one run: check it, build it, tick it to the end, and leave a complete run directory behind.
 
-Whatever happens — success, abort, a crashing user algorithm, bad config — the run directory ends
-up with ``run.json`` (status ``ok`` / ``aborted`` / ``failed``, reason, traceback), the resolved
-``config.yaml`` and every log row written so far. Files are written atomically, and a directory that
-already holds a finished run is never written into.
+A config error (any of :data:`~swarmbox.run.checks.INPUT_ERRORS`) is raised before anything is
+written — or, if only the build can detect it, after removing what the run had created. Once a run
+starts, whatever happens — success, abort, a crashing or hung user hook, a signal — the run
+directory ends up with ``run.json`` (status ``ok`` / ``aborted`` / ``failed`` / ``interrupted``,
+reason, traceback, simulated time and ticks reached), the resolved ``config.yaml`` and every log row
+written so far. Files are written atomically, and a directory that already holds a finished run is
+never written into.
 """
 
 from __future__ import annotations
@@ -11,7 +14,9 @@ from __future__ import annotations
 import json
 import os
 import platform
+import shutil
 import subprocess
+import time
 import traceback
 from collections.abc import Callable
 from datetime import UTC, datetime
@@ -27,9 +32,12 @@ from swarmbox.core.swarm import Swarm, gc_paused
 from swarmbox.faults import FaultConfigError, describe
 from swarmbox.record.schema import SCHEMA_VERSION, node_name
 from swarmbox.record.writer import Recorder
-from swarmbox.run import build, mission
+from swarmbox.run import build, checks, interrupt
+from swarmbox.run.build import ConfigError
 from swarmbox.run.config import GROUPS
 from swarmbox.run.progress import RunProgress
+from swarmbox.run.tally import SafetyTally
+from swarmbox.run.watchdog import HookTimeout, HookWatchdog
 
 _PROJECT_ROOT = Path(__file__).resolve().parents[2]
 
@@ -73,76 +81,159 @@ def run_choices(cfg: DictConfig, hydra_choices: Any) -> dict[str, str]:
     return choices
 
 
+def _refuse_finished(run_dir: Path) -> None:
+    if (run_dir / "run.json").exists():
+        raise RunExistsError(f"{run_dir} already holds a finished run; refusing to overwrite it")
+
+
+def _watchdog(cfg: DictConfig, swarm: Swarm) -> HookWatchdog | None:
+    """A hook watchdog for this run, or None: off when unset, and for vehicles the run did not start."""
+    limit = cfg.run.hook_timeout_s
+    if limit is None or getattr(swarm.backend, "launcher", "own") is None:
+        return None
+    dog = HookWatchdog(limit)
+    dog.guard(swarm.ground.algorithm, "ground")
+    for agent in swarm.agents:
+        dog.guard(agent.algorithm, f"drone {agent.node_id}")
+    return dog if dog.start() else None
+
+
+def _discard(run_dir: Path, existed: bool, logs_existed: bool) -> None:
+    """Remove what a run that never started created (its directory too, if the run made it).
+
+    Nothing was flushed before the first tick, so the recorder has no file open.
+    """
+    if not existed:
+        shutil.rmtree(run_dir, ignore_errors=True)
+        return
+    (run_dir / "config.yaml").unlink(missing_ok=True)
+    if not logs_existed:
+        shutil.rmtree(run_dir / "logs", ignore_errors=True)
+
+
 def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: list[str],
             prepare: Callable[[Swarm], None] | None = None) -> dict[str, Any]:
     """Run one configuration into ``run_dir``; returns the manifest written as ``run.json``.
 
-    ``prepare(swarm)`` is called once the swarm is built, before the first tick (programmatic use:
-    schedule events with ``swarm.schedule``).
+    Raises :class:`RunExistsError` or one of :data:`~swarmbox.run.checks.INPUT_ERRORS` (leaving the
+    disk as it was) when the run cannot start. ``prepare(swarm)`` is called once the swarm is built,
+    before the first tick (programmatic use: schedule events with ``swarm.schedule``).
     """
-    run_dir.mkdir(parents=True, exist_ok=True)
-    if (run_dir / "run.json").exists():
-        raise RunExistsError(f"{run_dir} already holds a finished run; refusing to overwrite it")
-    write_atomic(run_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
+    _refuse_finished(run_dir)
+    m = checks.check(cfg)
+    if cfg.mission.file:   # record the file's own mission, not the group it was loaded over
+        choices = {**choices, "mission": m.name}
+    existed = run_dir.exists()
+    logs_existed = (run_dir / "logs").exists()
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        write_atomic(run_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
+    except OSError as exc:
+        if run_dir.is_dir():
+            _discard(run_dir, existed, logs_existed)
+        raise ConfigError(f"run directory {run_dir} (run.out_dir / hydra.run.dir) cannot be written: "
+                          f"{exc.strerror or exc}") from None
     manifest: dict[str, Any] = {
         "schema": SCHEMA_VERSION, "status": "failed", "reason": "", "traceback": None,
         "seed": int(cfg.seed), "choices": choices, "overrides": overrides,
         "sim_time_s": 0.0, "wall_time_s": 0.0, "real_time_factor": None, "ticks": 0,
-        "tick_s": 1.0 / cfg.run.tick_hz, "n_drones": 0, "nodes": [],
-        "clocks": {},
+        "tick_s": 1.0 / cfg.run.tick_hz, "n_drones": m.swarm_size,
+        "nodes": [node_name(i) for i in [GROUND_ID, *m.drone_ids]], "clocks": build.clock_settings(cfg),
         "versions": _versions(), "git_sha": _git_sha(),
         "started_at": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     recorder = Recorder(run_dir)
     swarm = progress = None
+    dog = None
+    discard = False
+    started = time.perf_counter()
     try:
-        m = mission.load(cfg, build.rng_for(int(cfg.seed), "dataset"))
-        manifest["n_drones"] = m.swarm_size
-        if cfg.mission.file:   # record the file's own mission, not the group it was loaded over
-            manifest["choices"] = choices = {**choices, "mission": m.name}
-        manifest["nodes"] = [node_name(i) for i in [GROUND_ID, *m.drone_ids]]
-        manifest["clocks"] = build.clock_settings(cfg)
-        swarm = build.build_swarm(cfg, m, recorder)
-        if prepare is not None:
-            prepare(swarm)
-        label = f"{choices.get('algo', '?')} seed={cfg.seed}"
-        progress = RunProgress(label, m.max_sim_time_s) if cfg.run.progress else None
+        with interrupt.armed():
+            try:
+                swarm = build.build_swarm(cfg, m, recorder)
+            except checks.INPUT_ERRORS:   # found only while building (a fault the backend cannot express)
+                discard = True
+                _discard(run_dir, existed, logs_existed)
+                raise
+            if prepare is not None:
+                prepare(swarm)
+            dog = _watchdog(cfg, swarm)
+            tally = SafetyTally(swarm.backend)
+            label = f"{choices.get('algo', '?')} seed={cfg.seed}"
+            progress = RunProgress(label, m.max_sim_time_s) if cfg.run.progress else None
 
-        def tick_hook(s: Swarm) -> None:
-            recorder.maybe_flush()
-            if progress:
-                progress(s)
+            def tick_hook(s: Swarm) -> None:
+                recorder.maybe_flush()
+                if progress:
+                    progress(s)
 
-        outcome = swarm.run(m.max_sim_time_s, speed=cfg.run.speed, progress=tick_hook)
-        manifest.update(status=outcome.status, reason=outcome.reason, sim_time_s=outcome.sim_time_s,
-                        wall_time_s=outcome.wall_time_s, ticks=outcome.ticks,
-                        real_time_factor=outcome.real_time_factor)
+            outcome = swarm.run(m.max_sim_time_s, speed=cfg.run.speed, progress=tick_hook)
+        reason = "; ".join(filter(None, [outcome.reason, tally.summary()]))
+        manifest.update(status=outcome.status, reason=reason,
+                        sim_time_s=outcome.sim_time_s, wall_time_s=outcome.wall_time_s, ticks=outcome.ticks,
+                        real_time_factor=outcome.real_time_factor, safety=tally.record())
+    except checks.INPUT_ERRORS as exc:
+        if discard:
+            raise
+        manifest.update(status="failed", reason=f"{type(exc).__name__}: {exc}",   # raised while flying
+                        traceback=traceback.format_exc())
+    except interrupt.RunInterrupted as exc:
+        manifest.update(status="interrupted", reason=f"{exc} at t={_t(swarm):.1f} s")
+    except KeyboardInterrupt:     # no handler installed (programmatic use): record, then propagate
+        manifest.update(status="interrupted", reason=f"interrupted by SIGINT at t={_t(swarm):.1f} s")
+        raise
+    except HookTimeout as exc:
+        manifest.update(status="failed", reason=f"HookTimeout: {exc}", traceback=traceback.format_exc())
     except Exception as exc:
         manifest.update(status="failed", reason=f"{type(exc).__name__}: {exc}",
                         traceback=traceback.format_exc())
-        if swarm is not None:
-            manifest.update(sim_time_s=swarm.time.t_s, ticks=swarm.time.tick)
     finally:
+        if dog is not None:
+            dog.stop()
         if progress is not None:
             progress.close()
-        try:
-            if swarm is not None:
-                swarm.backend.close()
-        finally:
-            try:
-                with gc_paused():
-                    recorder.close()
-            except OSError as exc:
-                manifest.update(status="failed", reason=f"{manifest['reason']}; {exc}".strip("; "))
-            write_atomic(run_dir / "run.json", json.dumps(manifest, indent=2, sort_keys=True))
+        if manifest["status"] in ("failed", "interrupted"):
+            _reached(manifest, swarm, started)
+        if not discard:
+            _close(manifest, swarm, recorder, run_dir)
     return manifest
+
+
+def _t(swarm: Swarm | None) -> float:
+    return swarm.time.t_s if swarm is not None else 0.0
+
+
+def _reached(manifest: dict[str, Any], swarm: Swarm | None, started: float) -> None:
+    """How far a run that did not end by itself got: simulated time, ticks, wall time."""
+    wall_s = time.perf_counter() - started
+    manifest.update(wall_time_s=wall_s)
+    if swarm is not None:
+        manifest.update(sim_time_s=swarm.time.t_s, ticks=swarm.time.tick,
+                        real_time_factor=swarm.time.t_s / wall_s if wall_s > 0 else None)
+
+
+def _close(manifest: dict[str, Any], swarm: Swarm | None, recorder: Recorder, run_dir: Path) -> None:
+    """Stop the backend, finish every log file, then write run.json (last: it marks the run finished)."""
+    try:
+        if swarm is not None:
+            swarm.backend.close()
+    except Exception as exc:  # noqa: BLE001 - recorded; the logs must still be closed
+        manifest.update(reason=f"{manifest['reason']}; backend close: {exc}".strip("; "))
+    finally:
+        try:
+            with gc_paused():
+                recorder.close()
+        except OSError as exc:
+            manifest.update(status="failed", reason=f"{manifest['reason']}; {exc}".strip("; "))
+        write_atomic(run_dir / "run.json", json.dumps(manifest, indent=2, sort_keys=True))
 
 
 def summary_line(manifest: dict[str, Any], run_dir: Path) -> str:
     ch = manifest["choices"]
     head = f"{manifest['status'].upper():7} {ch.get('algo')}/{ch.get('mission')} seed={manifest['seed']}"
-    if manifest["status"] == "failed":
-        return f"{head}: {manifest['reason']}  [{run_dir}]"
+    if manifest["status"] in ("failed", "interrupted"):
+        return (f"{head}: {manifest['reason']} (stopped at t={manifest['sim_time_s']:.1f} s, tick "
+                f"{manifest['ticks']})  [{run_dir}]")
     rtf = manifest["real_time_factor"]
     tail = f" ({manifest['reason']})" if manifest["reason"] else ""
     return (f"{head}: {manifest['sim_time_s']:.1f} s simulated in {manifest['wall_time_s']:.2f} s "

@@ -151,3 +151,33 @@ def test_callback_analyzes_the_sweep_and_never_raises(sweep_dir, tmp_path, caplo
     assert (root / "tables" / "summary.csv").is_file()
     callback.on_multirun_end(OmegaConf.create({"hydra": {}}))    # no sweep dir: logged, not raised
     assert "sweep analysis failed" in caplog.text
+
+
+def _analyze(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "swarmbox.analyze", *args, "--no-figures"], cwd=ROOT,
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_truncated_table_makes_a_run_incomplete_unless_allowed(make_run):
+    run = make_run()
+    path = run / "logs" / "drone_1" / "messages.parquet"
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])   # truncated
+    refused = _analyze(str(run))
+    assert refused.returncode == 3, refused.stderr
+    assert "incomplete run" in refused.stderr and "drone_1/messages.parquet: unreadable" in refused.stderr
+    assert not (run / "tables").exists()
+    allowed = _analyze(str(run), "--allow-incomplete")
+    assert allowed.returncode == 0, allowed.stderr
+    assert "WARNING: incomplete run" in allowed.stderr and (run / "tables" / "metrics.csv").is_file()
+
+
+def test_sweep_lists_every_skipped_directory_with_its_reason(sweep_dir, tmp_path):
+    root = tmp_path / "sweep"
+    shutil.copytree(sweep_dir, root)
+    killed = root / "killed" / "logs" / "ground"
+    killed.mkdir(parents=True)
+    (killed / "stages.parquet.partial").write_bytes(b"PAR1")
+    proc = _analyze(str(root), "--n-boot", "50")
+    assert proc.returncode == 0, proc.stderr
+    assert "skipped: killed: no run.json" in proc.stdout
+    assert ", 1 skipped" in proc.stdout

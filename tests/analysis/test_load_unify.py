@@ -47,7 +47,7 @@ def test_corrupt_file_is_reported_not_raised(make_run):
     (path / "logs" / "drone_0" / "events.parquet").write_bytes(b"not parquet")
     run = load_run(path)
     assert any("drone_0/events.parquet: unreadable" in p for p in run.problems)
-    assert not run.incomplete   # events are not required
+    assert run.incomplete   # a damaged record is never analyzed as if it were whole
 
 
 def test_missing_or_broken_manifest_raises(tmp_path, make_run):

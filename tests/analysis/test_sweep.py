@@ -90,12 +90,15 @@ def test_bad_runs_are_reported_and_skipped(sweep_dir, tmp_path):
     build_run(root / "partial", Scenario(skip_files=("drone_2/state",), choices={"algo": "fast"}))
     (root / "garbled").mkdir()
     (root / "garbled" / "run.json").write_text("{")
+    (root / "killed" / "logs" / "drone_0").mkdir(parents=True)           # killed: no run.json
+    (root / "killed" / "logs" / "drone_0" / "state.parquet.partial").write_bytes(b"PAR1")
     aborted = json.loads((root / "0" / "run.json").read_text()) | {"status": "aborted", "seed": 9}
     build_run(root / "aborted", Scenario(ticks=400, seed=9, choices={"algo": "fast"}))
     (root / "aborted" / "run.json").write_text(json.dumps(aborted))
     res = analyze_sweep(root, OPTS)
     skipped = res.problems[res.problems["severity"] == "skipped"]
-    assert sorted(skipped["run"]) == ["failed", "garbled", "partial"]
+    assert sorted(skipped["run"]) == ["failed", "garbled", "killed", "partial"]
+    assert "no run.json" in skipped.set_index("run").loc["killed", "problem"]
     assert "boom" in skipped.set_index("run").loc["failed", "problem"]
     assert len(res.runs) == 11 and (res.runs["status"] == "aborted").sum() == 1
     fast = res.summary.set_index(["algo", "metric"]).loc[("fast", "mission_duration_s")]

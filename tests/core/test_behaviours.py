@@ -35,7 +35,8 @@ def test_min_alive_aborts_the_mission_with_the_reason(run):
     manifest, d = run(*HOVER, "algo.params.hover_s=30", "run.min_alive=4",
                       prepare=lambda s: s.schedule(6.0, lambda sw: sw.remove_agent(2)))
     assert manifest["status"] == "aborted"
-    assert manifest["reason"] == "only 3 of 4 drones alive (min_alive 4)"
+    assert manifest["reason"].startswith("only 3 of 4 drones alive (min_alive 4); ")
+    assert "drone 2 removed" in manifest["reason"]
     assert list(table(d, "ground", "stages")["stage"])[-1] == Stage.ABORT
 
 

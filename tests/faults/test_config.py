@@ -5,7 +5,7 @@ import dataclasses
 import pytest
 from hydra.errors import ConfigCompositionException
 
-from swarmbox.faults import MODELS, FaultConfig, describe, selected
+from swarmbox.faults import MODELS, FaultConfig, FaultConfigError, describe, selected
 from swarmbox.faults.schema import param_types
 from tests.conftest import compose_config
 from tests.faults.helpers import HOVER, fault_events
@@ -68,10 +68,11 @@ def test_misspelt_key_fails_at_compose_time(override):
      "fault.loss_prob is set but no selected fault has that parameter (selected: gps_drift)"),
     (["fault.targets=[1]"], "fault.targets is set but no selected fault has that parameter (selected: none)"),
 ])
-def test_bad_fault_config_is_refused_before_the_first_tick(run, overrides, message):
-    manifest, d = run(*HOVER, *overrides)
-    assert manifest["status"] == "failed" and manifest["ticks"] == 0
-    assert "FaultConfigError" in manifest["reason"] and message in manifest["reason"], manifest["reason"]
+def test_bad_fault_config_is_refused_before_anything_is_written(run, tmp_path, overrides, message):
+    with pytest.raises(FaultConfigError) as err:
+        run(*HOVER, *overrides, name="bad")
+    assert message in str(err.value)
+    assert not (tmp_path / "bad").exists()
 
 
 @pytest.mark.parametrize("fault, needs", [
@@ -80,11 +81,12 @@ def test_bad_fault_config_is_refused_before_the_first_tick(run, overrides, messa
     ("crash", "a crash input (crashed)"),
     ("motor_loss", "a thrust (acceleration scale) input (accel_scale)"),
 ])
-def test_fault_the_backend_cannot_express_names_fault_and_backend(run, fault, needs):
-    manifest, _ = run(*HOVER, "backend._target_=tests.faults.backends.BareBackend", f"fault={fault}")
-    assert manifest["status"] == "failed", manifest["reason"]
+def test_fault_the_backend_cannot_express_names_fault_and_backend(run, tmp_path, fault, needs):
+    with pytest.raises(FaultConfigError) as err:
+        run(*HOVER, "backend._target_=tests.faults.backends.BareBackend", f"fault={fault}", name="bad")
     assert (f"fault {fault} cannot run on backend 'sim' (tests.faults.backends.BareBackend): it needs "
-            f"{needs}, which this backend does not provide") in manifest["reason"]
+            f"{needs}, which this backend does not provide") in str(err.value)
+    assert not (tmp_path / "bad").exists()   # found while building: what the run made is removed
 
 
 def test_backend_independent_faults_run_on_a_bare_backend(run):

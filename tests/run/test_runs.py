@@ -7,6 +7,8 @@ import pandas as pd
 import pytest
 
 from swarmbox.core.stages import Stage
+from swarmbox.core.topology import TopologyError
+from swarmbox.run.build import ConfigError
 from tests.conftest import table
 
 NODES = ["ground", "drone_0", "drone_1", "drone_2", "drone_3"]
@@ -70,9 +72,10 @@ def test_every_topology_completes_the_formation(run, topology):
     ("{0:1,1:0,2:-1,3:-1}", "cycle"),
     ("{0:-1,1:9,2:-1,3:-1}", "unknown superior 9"),
 ])
-def test_bad_topology_fails_with_the_cause(run, superiors, cause):
-    manifest, _ = run("topology=explicit", f"topology.superiors={superiors}")
-    assert manifest["status"] == "failed" and cause in manifest["reason"]
+def test_bad_topology_is_refused_with_the_cause_and_nothing_written(run, tmp_path, superiors, cause):
+    with pytest.raises(TopologyError, match=f"topology.superiors: .*{cause}"):
+        run("topology=explicit", f"topology.superiors={superiors}", name="bad")
+    assert not (tmp_path / "bad").exists()
 
 
 def test_removed_drone_does_not_stall_the_swarm(run):
@@ -139,6 +142,7 @@ def test_node_clock_offsets_are_applied_and_recorded(run):
     assert d2["t_s"].iloc[0] - g["t_s"].iloc[0] == pytest.approx(0.5)
 
 
-def test_unknown_clock_node_is_refused(run):
-    manifest, _ = run("algo=hover", "mission=hover", "run.clocks={drone_9: {offset_s: 1}}")
-    assert manifest["status"] == "failed" and "unknown node 'drone_9'" in manifest["reason"]
+def test_unknown_clock_node_is_refused(run, tmp_path):
+    with pytest.raises(ConfigError, match="run.clocks: unknown node 'drone_9'"):
+        run("algo=hover", "mission=hover", "run.clocks={drone_9: {offset_s: 1}}", name="bad")
+    assert not (tmp_path / "bad").exists()

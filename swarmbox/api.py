@@ -26,7 +26,7 @@ from collections.abc import Mapping, Sequence
 from enum import IntEnum, StrEnum
 from typing import TYPE_CHECKING, Any, NamedTuple, final
 
-from swarmbox.core.messages import DescendantState, Heartbeat, Report, TaskCommand
+from swarmbox.core.messages import DescendantState, Heartbeat, ProxAlert, Report, TaskCommand
 from swarmbox.core.stages import Stage
 
 if TYPE_CHECKING:  # only for type checkers: the node classes stay out of the user's namespace
@@ -34,7 +34,7 @@ if TYPE_CHECKING:  # only for type checkers: the node classes stay out of the us
 
 __all__ = [
     "DescendantState", "DroneAlgorithm", "DroneContext", "FlightMode", "GroundAlgorithm",
-    "GroundContext", "Heartbeat", "MissionInfo", "Report", "Setpoint", "SetpointKind", "Stage",
+    "GroundContext", "Heartbeat", "MissionInfo", "ProxAlert", "Report", "Setpoint", "SetpointKind", "Stage",
     "TaskCommand", "Telemetry", "wrap_angle",
 ]
 
@@ -239,7 +239,10 @@ class DroneContext(_Context):
 
     @property
     def proximity(self) -> tuple[DescendantState, ...]:
-        """Drones the ground saw within ``run.proximity_m`` of this one (its latest ProxAlert)."""
+        """Drones the ground saw within ``run.proximity_m`` of this one (its latest ProxAlert).
+
+        Empty once the ground sends its all-clear, or when no alert came for ``lost_inferior_ticks``.
+        """
         alert = self._node.prox_alert
         return () if alert is None else alert.neighbours
 
@@ -299,6 +302,8 @@ class DroneAlgorithm:
     - ``exec_complete`` -> bool — every tick of EXECUTION; may flip back. **Required.**
     - ``on_task(ctx, task)`` — for every TaskCommand delivered, in order, before the tick's loop hook.
     - ``on_report(ctx, report)`` — for every Report delivered from a direct inferior.
+    - ``on_prox_alert(ctx, alert)`` — for every ProxAlert from the ground: every tick while other
+      drones are within ``run.proximity_m`` (``alert.neighbours``), then once empty (all clear).
     - ``successors`` -> Sequence[int] — the fallback superiors this drone advertises to its own
       inferiors; default: its own superior.
 
@@ -328,6 +333,9 @@ class DroneAlgorithm:
 
     def on_report(self, ctx: DroneContext, report: Report) -> None:
         """Called for every Report delivered from a direct inferior."""
+
+    def on_prox_alert(self, ctx: DroneContext, alert: ProxAlert) -> None:
+        """Called for every ProxAlert delivered (``alert.neighbours``: ids and reported positions)."""
 
     def successors(self, ctx: DroneContext) -> Sequence[int]:
         return (ctx.superior,)

@@ -32,6 +32,7 @@ class AgentNode(Node):
         self.report_data = ""
         self.last_task: TaskCommand | None = None
         self.prox_alert: ProxAlert | None = None
+        self._prox_tick = 0
         self.peer_heartbeats: dict[int, Heartbeat] = {}
         self._sup_silent, self._heard_superior = 0, False
         self._successor_list: tuple[int, ...] = ()
@@ -81,8 +82,15 @@ class AgentNode(Node):
             elif kind is TaskAck:
                 self.on_ack(msg)
             elif kind is ProxAlert:
-                self.prox_alert = msg
+                self._on_prox_alert(msg)
         inbox.clear()
+        if self.prox_alert is not None and self.time.tick - self._prox_tick > self.timing.lost_inferior_ticks:
+            self.prox_alert = None   # the ground's all-clear was lost, or the ground fell silent
+
+    def _on_prox_alert(self, alert: ProxAlert) -> None:
+        self.prox_alert = alert if alert.neighbours else None
+        self._prox_tick = self.time.tick
+        call_hook(self, "on_prox_alert", self.algorithm.on_prox_alert, self.ctx, alert)
 
     def _on_task(self, cmd: TaskCommand) -> None:
         if cmd.reliable:

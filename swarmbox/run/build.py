@@ -53,7 +53,8 @@ def timing_of(cfg: DictConfig) -> CoreTiming:
         tick_s=1.0 / r.tick_hz, lost_inferior_ticks=r.lost_inferior_ticks,
         lost_superior_ticks=r.lost_superior_ticks, task_retry_ticks=r.task_retry_ticks,
         task_max_retries=r.task_max_retries, arm_retry_ticks=r.arm_retry_ticks,
-        proximity_m=r.proximity_m, min_alive=r.min_alive, state_every_ticks=max(1, r.state_every_ticks),
+        proximity_m=r.proximity_m, proximity_window_s=r.proximity_window_s, min_alive=r.min_alive,
+        state_every_ticks=max(1, r.state_every_ticks),
         timeouts_s=dict(OmegaConf.to_container(r.timeouts_s, resolve=True)))
 
 

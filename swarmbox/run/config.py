@@ -99,7 +99,8 @@ class RunConfig:
     task_retry_ticks: int = 8       # reliable TaskCommand re-send period
     task_max_retries: int = 40
     arm_retry_ticks: int = 20
-    proximity_m: float = 2.0        # ProxAlert radius
+    proximity_m: float = 2.0        # ProxAlert radius (m)
+    proximity_window_s: float = 0.0  # s; > 0: also alert pairs that will come that close within it
     min_alive: int = 1              # fewer alive drones after ICEBREAK: abort
     state_every_ticks: int = 1      # state-table sampling period
     # node name -> {offset_s, drift_ppm}: local = true * (1 + drift_ppm * 1e-6) + offset_s, e.g.

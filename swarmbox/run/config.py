@@ -108,7 +108,9 @@ class RunConfig:
     clocks: Optional[Any] = None
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     speed: float = 1.0              # real-time backends: wall-clock pacing factor (SITL speed-up)
-    progress: bool = True           # progress lines on stderr for long runs
+    progress: bool = True           # progress lines on stderr for long runs (off while the monitor shows)
+    monitor: str = "auto"           # live dashboard: auto (real-time backends, on a terminal) | on | off
+    monitor_hz: float = 4.0         # Hz, dashboard refresh rate
     out_dir: Optional[str] = None   # default: Hydra's output directory
 
 

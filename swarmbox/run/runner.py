@@ -23,7 +23,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from swarmbox import __version__
+from swarmbox import __version__, monitor as live_monitor
 from swarmbox.core.messages import GROUND_ID
 from swarmbox.core.swarm import Swarm, gc_paused
 from swarmbox.faults import FaultConfigError, describe
@@ -109,17 +109,20 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         "started_at": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     recorder = Recorder(run_dir)
-    swarm = None
+    swarm = monitor = None
     try:
         m = mission.load(cfg, build.rng_for(int(cfg.seed), "dataset"))
         manifest["n_drones"] = m.swarm_size
         manifest["nodes"] = [node_name(i) for i in [GROUND_ID, *m.drone_ids]]
         manifest["clocks"] = build.clock_settings(cfg)
-        swarm = build.build_swarm(cfg, m, recorder)
+        label = f"{choices.get('algo', '?')} seed={cfg.seed}"
+        monitor = _monitor(cfg, f"SwarmBox {choices.get('algo', '?')}/{m.name} seed={cfg.seed}")
+        swarm = build.build_swarm(cfg, m, monitor.tap(recorder) if monitor else recorder)
         if prepare is not None:
             prepare(swarm)
-        label = f"{choices.get('algo', '?')} seed={cfg.seed}"
-        progress = _progress(label) if cfg.run.progress else None
+        if monitor:
+            monitor.start(swarm)
+        progress = _progress(label) if cfg.run.progress and not monitor else None
 
         def tick_hook(s: Swarm) -> None:
             recorder.maybe_flush()
@@ -136,6 +139,8 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         if swarm is not None:
             manifest.update(sim_time_s=swarm.time.t_s, ticks=swarm.time.tick)
     finally:
+        if monitor is not None:
+            manifest["monitor"] = monitor.stop(swarm)
         try:
             if swarm is not None:
                 swarm.backend.close()
@@ -147,6 +152,21 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
                 manifest.update(status="failed", reason=f"{manifest['reason']}; {exc}".strip("; "))
             write_atomic(run_dir / "run.json", json.dumps(manifest, indent=2, sort_keys=True))
     return manifest
+
+
+def _monitor(cfg: DictConfig, title: str):
+    """The live dashboard of this run, or None (see :mod:`swarmbox.monitor`)."""
+    realtime = bool(getattr(build.backend_class(cfg), "realtime", False))
+    if not live_monitor.wanted(cfg.run.monitor, realtime=realtime, multirun=_in_sweep()):
+        return None
+    return live_monitor.create(title, cfg.run.monitor_hz)
+
+
+def _in_sweep() -> bool:
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+
+    return HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
 
 
 def summary_line(manifest: dict[str, Any], run_dir: Path) -> str:

@@ -1,0 +1,42 @@
+"""The live monitor: when it is on, what it reads, and what it shows at the end of a run."""
+
+from __future__ import annotations
+
+import pytest
+
+from swarmbox.monitor import wanted
+from tests.conftest import table
+
+CROSSING = ("algo=crossing", "mission=crossing", "run.proximity_m=10")
+
+
+def test_on_by_default_only_for_real_time_backends_on_a_terminal():
+    assert wanted("auto", realtime=True, multirun=False, tty=True)
+    assert not wanted("auto", realtime=False, multirun=False, tty=True)     # simulation
+    assert not wanted("auto", realtime=True, multirun=True, tty=True)       # a sweep
+    assert not wanted("auto", realtime=True, multirun=False, tty=False)     # output to a file or pipe
+    assert wanted("on", realtime=False, multirun=True, tty=False)
+    assert not wanted("off", realtime=True, multirun=False, tty=True)
+    with pytest.raises(ValueError, match="run.monitor must be one of auto, on, off"):
+        wanted("yes", realtime=True, multirun=False)
+
+
+def test_simulation_run_with_the_monitor_on_shows_the_final_state(run, capsys):
+    manifest, d = run(*CROSSING, "run.monitor=on", "run.monitor_hz=50")
+    assert manifest["status"] == "ok", manifest["reason"]
+    mon = manifest["monitor"]
+    assert mon["frames"] >= 1 and mon["snapshots"] >= 1 and 0 < mon["cpu_share"] < 1
+    screen = capsys.readouterr().err
+    assert "stage TERMINATION" in screen and "drones 4/4 alive" in screen
+    # both proximity episodes of the crossing, as the ground logged them
+    assert "proximity 0-1 over: closest 2.0 m" in screen and "proximity 0-2 over: closest 8.5 m" in screen
+    for i in range(4):
+        assert f"\n    {i}  alive" in screen
+
+
+def test_monitor_leaves_the_logs_unchanged(run):
+    _, plain = run(*CROSSING, "run.monitor=off")
+    _, watched = run(*CROSSING, "run.monitor=on")
+    for node, name in (("ground", "events"), ("ground", "messages"), ("drone_1", "state")):
+        a, b = table(plain, node, name), table(watched, node, name)
+        assert a.equals(b), (node, name)

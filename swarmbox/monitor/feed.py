@@ -97,7 +97,8 @@ def snapshot(ground: Any, wall_s: float, ticks_ago: int = 0) -> Snapshot:
         direct.add(drone_id)
     forwarded = tuple(d for r in rows if r.alive for d in r.report.descendants if d.drone_id not in direct)
     _, alive = ground.head_count()
-    return Snapshot(wall_s, ground.clock.now() - ticks_ago * ground.tick_s, ground.time.tick - ticks_ago, ground.tick_s, ground.stage.name,
+    return Snapshot(wall_s, ground.clock.now() - ticks_ago * ground.tick_s, ground.time.tick - ticks_ago,
+                    ground.tick_s, ground.stage.name,
                     ground.stage_tick * ground.tick_s, ground.reason, ground.mission.swarm_size,
                     tuple(rows), forwarded, tuple(ground.prox_pairs.items()), alive)
 

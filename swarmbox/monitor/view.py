@@ -157,7 +157,8 @@ class DashboardView:
             out.append(f"{_stage(fw.stage):<12}{n:8.1f}{e:8.1f}{-d + 0.0:7.1f}\n")
         joined = {r.drone_id for r in snap.drones} | {f.drone_id for f in snap.forwarded}
         hidden, waiting = len(joined) - shown, snap.swarm_size - len(joined)
-        notes = [f"{hidden} more not shown" if hidden > 0 else "", f"{waiting} waiting" if waiting > 0 else ""]
+        notes = [f"{hidden} more not shown" if hidden > 0 else "",
+                 f"{waiting} waiting" if waiting > 0 else ""]
         if any(notes):
             out.append(", ".join(x for x in notes if x), style="dim")
         out.rstrip()

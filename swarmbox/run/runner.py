@@ -23,7 +23,8 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from swarmbox import __version__, monitor as live_monitor
+from swarmbox import __version__
+from swarmbox import monitor as live_monitor
 from swarmbox.core.messages import GROUND_ID
 from swarmbox.core.swarm import Swarm, gc_paused
 from swarmbox.faults import FaultConfigError, describe

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import rerun as rr
+import rerun.blueprint as rrb
 
 from swarmbox.analysis.replay import Replay, enu, latency_rgb, node_label
 from swarmbox.analysis.unify import T
@@ -123,12 +124,30 @@ def _metrics(rec: rr.RecordingStream, rp: Replay) -> None:
                          columns=rr.Scalars.columns(scalars=rows["value"].to_numpy(dtype="float64")))
 
 
+def _layout() -> rrb.Blueprint:
+    """The swarm in 3-D beside the link and metric series and the event log."""
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial3DView(origin="world", name="swarm (ENU)"),
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin="metrics/latency_ms", name="latency (ms) per drone"),
+                rrb.TimeSeriesView(origin="metrics/loss_ratio", name="loss ratio per drone"),
+                rrb.TimeSeriesView(origin="metrics/disc_n_m", name="GNSS - estimate, north (m)"),
+                rrb.TextLogView(origin="/", contents=["stages", "events"], name="stages and events"),
+            ),
+            column_shares=[3, 2],
+        ),
+        rrb.TimePanel(timeline="run_time"),
+        collapse_panels=True,
+    )
+
+
 def export_rerun(rp: Replay, path: str | Path) -> Path:
     """Write the replay as a Rerun recording (written beside ``path`` first, then renamed)."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.partial")
     rec = rr.RecordingStream("swarmbox", recording_id=f"{rp.name}-{rp.span[0]:.3f}-{rp.span[1]:.3f}")
-    rec.save(tmp)
+    rec.save(tmp, default_blueprint=_layout())
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     _drones(rec, rp)
     _links(rec, rp)

@@ -2,7 +2,8 @@
 
 ``run.monitor``: ``auto`` (default) shows it for real-time backends (PX4, MAVLink vehicles) when
 stderr is a terminal and the run is not part of a sweep; ``on`` always; ``off`` never.
-``run.monitor_hz`` sets the refresh rate. See docs/monitor.md.
+``run.monitor_hz`` sets the refresh rate. ``run.rerun`` (a Rerun viewer's URL or an ``.rrd`` path)
+also streams the run live to Rerun. See docs/monitor.md.
 
 This module decides without importing rich; the dashboard itself lives in :mod:`.live`.
 """
@@ -25,7 +26,8 @@ def wanted(mode: str, *, realtime: bool, multirun: bool, tty: bool | None = None
     return realtime and tty and not multirun
 
 
-def create(title: str, rate_hz: float) -> Any:
+def create(title: str, rate_hz: float, *, dashboard: bool = True, rerun: str | None = None) -> Any:
+    """The run's monitor: the dashboard, a live Rerun stream (``run.rerun``), or both."""
     from swarmbox.monitor.live import Monitor
 
-    return Monitor(title, rate_hz=rate_hz)
+    return Monitor(title, rate_hz=rate_hz, dashboard=dashboard, rerun=rerun)

@@ -72,7 +72,7 @@ class DashboardView:
             while len(h.counts) > 1 and h.counts[0][0] < horizon:
                 h.counts.popleft()
 
-    def add_event(self, node_id: int, row: tuple) -> None:
+    def add_event(self, node_id: int, row: tuple) -> str:
         t_s, _, kind, name, subject, data = row[:6]
         if kind == "stage":
             text = f"stage {name}" + (f": {data}" if data else "")
@@ -81,7 +81,9 @@ class DashboardView:
         else:
             about = "" if subject in (NO_SUBJECT, node_id) else f" ({_node(subject)})"
             text = f"{kind}/{name}{about}{_short(data)}"
-        self.events.append(f"{t_s:8.2f}  {_node(node_id):<8} {text}")
+        line = f"{t_s:8.2f}  {_node(node_id):<8} {text}"
+        self.events.append(line)
+        return line
 
     # -- numbers --------------------------------------------------------------------------------
     def latency_ms(self, drone_id: int) -> float | None:

@@ -123,7 +123,7 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
             prepare(swarm)
         if monitor:
             monitor.start(swarm)
-        progress = _progress(label) if cfg.run.progress and not monitor else None
+        progress = _progress(label) if cfg.run.progress and not (monitor and monitor.dashboard) else None
 
         def tick_hook(s: Swarm) -> None:
             recorder.maybe_flush()
@@ -158,9 +158,10 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
 def _monitor(cfg: DictConfig, title: str):
     """The live dashboard of this run, or None (see :mod:`swarmbox.monitor`)."""
     realtime = bool(getattr(build.backend_class(cfg), "realtime", False))
-    if not live_monitor.wanted(cfg.run.monitor, realtime=realtime, multirun=_in_sweep()):
+    dashboard = live_monitor.wanted(cfg.run.monitor, realtime=realtime, multirun=_in_sweep())
+    if not dashboard and not cfg.run.rerun:
         return None
-    return live_monitor.create(title, cfg.run.monitor_hz)
+    return live_monitor.create(title, cfg.run.monitor_hz, dashboard=dashboard, rerun=cfg.run.rerun)
 
 
 def _in_sweep() -> bool:

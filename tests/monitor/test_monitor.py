@@ -40,3 +40,21 @@ def test_monitor_leaves_the_logs_unchanged(run):
     for node, name in (("ground", "events"), ("ground", "messages"), ("drone_1", "state")):
         a, b = table(plain, node, name), table(watched, node, name)
         assert a.equals(b), (node, name)
+
+
+def test_live_stream_to_a_rerun_recording(run, tmp_path):
+    import rerun.chunk as rrc
+
+    target = tmp_path / "live.rrd"
+    manifest, _ = run(*CROSSING, "run.monitor=off", f"run.rerun={target}", "run.monitor_hz=40")
+    assert manifest["status"] == "ok", manifest["reason"]
+    assert manifest["monitor"]["rerun_frames"] >= 1
+    entities, texts = set(), []
+    for chunk in rrc.RrdReader(target).store().stream():
+        entities.add(chunk.entity_path)
+        if chunk.entity_path == "/events":
+            texts += chunk.to_record_batch().column("TextLog:text").to_pylist()
+    assert {f"/world/drones/{i}" for i in range(4)} <= entities
+    assert {f"/world/links/ground_drone_{i}" for i in range(4)} <= entities
+    flat = " ".join(str(t) for t in texts)
+    assert "stage TERMINATION" in flat and "proximity 0-1 over" in flat

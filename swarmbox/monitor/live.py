@@ -17,7 +17,6 @@ from rich.live import Live
 from swarmbox.monitor.feed import GroundFeed, TappedRecorder, snapshot
 from swarmbox.monitor.view import DashboardView
 
-
 _LEVEL = {"error": "ERROR", "failsafe": "ERROR", "collision": "ERROR", "safety": "WARN", "fault": "WARN",
           "proximity": "WARN", "topology": "WARN"}
 

@@ -111,7 +111,8 @@ class RunConfig:
     progress: bool = True           # progress lines on stderr for long runs (off while the monitor shows)
     monitor: str = "auto"           # live dashboard: auto (real-time backends, on a terminal) | on | off
     monitor_hz: float = 4.0         # Hz, dashboard refresh rate
-    rerun: Optional[str] = None     # stream live to Rerun: a viewer URL (rerun+http://127.0.0.1:9876/proxy) or .rrd
+    # stream live to Rerun: a viewer's URL (rerun+http://127.0.0.1:9876/proxy) or an .rrd path
+    rerun: Optional[str] = None
     out_dir: Optional[str] = None   # default: Hydra's output directory
 
 

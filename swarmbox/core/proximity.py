@@ -77,6 +77,8 @@ class ProximityTracker:
         out: dict[Pair, tuple[float, bool]] = {}
         for a, b in _pairs_within(view, reach):
             da, db = view[a], view[b]
+            if da.drone_id == db.drone_id:   # seen directly and forwarded, during a handover
+                continue
             dist = math.dist(da.pos_ned_m, db.pos_ned_m)
             pair = (da.drone_id, db.drone_id) if da.drone_id < db.drone_id else (db.drone_id, da.drone_id)
             if dist < self.distance_m:

@@ -34,6 +34,7 @@ class Monitor:
         self.dashboard = dashboard
         self._rerun_target = rerun
         self.stream = None
+        self.error = ""
         self._rate_hz = rate_hz
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -61,8 +62,11 @@ class Monitor:
 
     def _loop(self) -> None:
         period = 1.0 / self._rate_hz
-        while not self._stop.wait(period):
-            self._frame()
+        try:
+            while not self._stop.wait(period):
+                self._frame()
+        except Exception as exc:  # a broken screen must not touch the run: stop drawing, say why
+            self.error = f"{type(exc).__name__}: {exc}"
 
     def _frame(self) -> None:
         t0 = time.thread_time()
@@ -85,18 +89,20 @@ class Monitor:
     def stop(self, swarm: Any | None = None) -> dict[str, float]:
         """Stop rendering (the last frame stays on screen); returns what the monitor cost."""
         self._stop.set()
-        if self._thread is not None:
-            self._thread.join()
+        if self._thread is None:
+            return {}   # never started: the run failed while being built
+        self._thread.join()
         if swarm is not None:
             swarm.ground.observer = None
             self.feed.latest = snapshot(swarm.ground, time.perf_counter(), ticks_ago=1)   # the final state
-        self._frame()
+        if not self.error:
+            self._frame()
         if self._live is not None:
             self._live.stop()
         streamed = self.stream.close() if self.stream is not None else None
         wall = time.perf_counter() - self._started[0]
         cpu = time.process_time() - self._started[1]
-        return {"frames": self._frames, "rerun_frames": streamed, "render_cpu_s": round(self._cpu_s, 4),
+        return {"frames": self._frames, "rerun_frames": streamed, "error": self.error, "render_cpu_s": round(self._cpu_s, 4),
                 "snapshot_s": round(self.feed.snapshot_cost_s, 4), "snapshots": self.feed.snapshots,
                 "process_cpu_s": round(cpu, 3), "wall_s": round(wall, 3),
                 "cpu_share": round((self._cpu_s + self.feed.snapshot_cost_s) / cpu, 5) if cpu > 0 else 0.0}

@@ -141,7 +141,10 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
             manifest.update(sim_time_s=swarm.time.t_s, ticks=swarm.time.tick)
     finally:
         if monitor is not None:
-            manifest["monitor"] = monitor.stop(swarm)
+            try:
+                manifest["monitor"] = monitor.stop(swarm)
+            except Exception as exc:  # watching must never cost the run its logs
+                manifest["monitor"] = {"error": f"{type(exc).__name__}: {exc}"}
         try:
             if swarm is not None:
                 swarm.backend.close()

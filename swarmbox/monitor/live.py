@@ -102,7 +102,8 @@ class Monitor:
         streamed = self.stream.close() if self.stream is not None else None
         wall = time.perf_counter() - self._started[0]
         cpu = time.process_time() - self._started[1]
-        return {"frames": self._frames, "rerun_frames": streamed, "error": self.error, "render_cpu_s": round(self._cpu_s, 4),
+        return {"frames": self._frames, "rerun_frames": streamed, "error": self.error,
+                "render_cpu_s": round(self._cpu_s, 4),
                 "snapshot_s": round(self.feed.snapshot_cost_s, 4), "snapshots": self.feed.snapshots,
                 "process_cpu_s": round(cpu, 3), "wall_s": round(wall, 3),
                 "cpu_share": round((self._cpu_s + self.feed.snapshot_cost_s) / cpu, 5) if cpu > 0 else 0.0}

@@ -11,6 +11,7 @@ import os
 import re
 import shutil
 import subprocess
+import sys
 import time
 import uuid
 from pathlib import Path
@@ -31,7 +32,7 @@ def _tmux(socket: str, *args: str) -> str:
 
 def test_dashboard_shows_stages_drones_and_a_lost_link(tmp_path):
     socket, run_dir = f"swarmbox-{uuid.uuid4().hex[:8]}", tmp_path / "run"
-    cmd = (f"cd {ROOT} && PYTHONPATH={os.environ.get('PYTHONPATH', ROOT)} python -m swarmbox.run "
+    cmd = (f"cd {ROOT} && PYTHONPATH={os.environ.get('PYTHONPATH', ROOT)} {sys.executable} -m swarmbox.run "
            f"backend=mavsim run.speed=4 algo=hover mission=hover algo.params.hover_s=16 "
            f"fault=link_cut 'fault.targets=[2]' fault.onset_s=12 run.out_dir={run_dir}; "
            f"echo EXIT=$?; sleep 600")

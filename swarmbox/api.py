@@ -26,6 +26,7 @@ from collections.abc import Mapping, Sequence
 from enum import IntEnum, StrEnum
 from typing import TYPE_CHECKING, Any, NamedTuple, final
 
+from swarmbox.area import Area, mission_area, mission_grid
 from swarmbox.core.messages import DescendantState, Heartbeat, ProxAlert, Report, TaskCommand
 from swarmbox.core.stages import Stage
 
@@ -33,9 +34,9 @@ if TYPE_CHECKING:  # only for type checkers: the node classes stay out of the us
     import numpy as np
 
 __all__ = [
-    "DescendantState", "DroneAlgorithm", "DroneContext", "FlightMode", "GroundAlgorithm",
-    "GroundContext", "Heartbeat", "MissionInfo", "ProxAlert", "Report", "Setpoint", "SetpointKind", "Stage",
-    "TaskCommand", "Telemetry", "wrap_angle",
+    "Area", "DescendantState", "DroneAlgorithm", "DroneContext", "FlightMode", "GroundAlgorithm",
+    "GroundContext", "Heartbeat", "MissionInfo", "ProxAlert", "Report", "Setpoint", "SetpointKind",
+    "Stage", "TaskCommand", "Telemetry", "mission_area", "mission_grid", "wrap_angle",
 ]
 
 Vec3 = tuple[float, float, float]

@@ -38,6 +38,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from swarmbox.api import (
+    Area,
     DroneAlgorithm,
     DroneContext,
     GroundAlgorithm,
@@ -45,6 +46,7 @@ from swarmbox.api import (
     Setpoint,
     Stage,
     TaskCommand,
+    mission_area,
 )
 
 CLIMB, SURVEY, RETURN, DESCEND, DONE = range(5)   # a drone's flight phases
@@ -52,18 +54,7 @@ Sector = tuple[float, float, float, float]   # north_min, east_min, north_max, e
 Point = tuple[float, float]                  # north, east (m)
 
 
-def mission_area(values: dict[int, tuple[float, ...]]) -> Sector:
-    """The area ``(n_min, e_min, n_max, e_max)`` from the mission values 0 and 1."""
-    if 0 not in values or 1 not in values or len(values[0]) < 2 or len(values[1]) < 2:
-        raise ValueError("airview: mission.values needs 0: [north_min, east_min] and "
-                         "1: [north_max, east_max] (the area to cover)")
-    (n0, e0), (n1, e1) = values[0][:2], values[1][:2]
-    if n1 <= n0 or e1 <= e0:
-        raise ValueError(f"airview: empty area {values[0]} .. {values[1]}")
-    return (n0, e0, n1, e1)
-
-
-def split_area(area: Sector, count: int) -> list[Sector]:
+def split_area(area: Area, count: int) -> list[Sector]:
     """Split ``area`` into ``count`` rectangles of equal area: rows along north, columns along east.
 
     The number of rows follows the area's aspect ratio; when ``count`` is not a multiple of it,
@@ -144,7 +135,7 @@ def altitudes_m(homes: dict[int, Point], sectors: dict[int, Sector], base_m: flo
 class CoverageMap:
     """A 1 m grid over the area; a cell is covered once inside some drone's footprint."""
 
-    def __init__(self, area: Sector, footprint_m: float) -> None:
+    def __init__(self, area: Area, footprint_m: float) -> None:
         self.area, self.footprint_m = area, footprint_m
         n0, e0, n1, e1 = area
         self.cells = np.zeros((math.ceil(n1 - n0), math.ceil(e1 - e0)), dtype=bool)
@@ -169,7 +160,7 @@ class AirviewGround(GroundAlgorithm):
 
     def prep_once(self, ctx: GroundContext) -> None:
         p = ctx.params
-        self.area = mission_area(dict(ctx.mission.values))
+        self.area = mission_area(ctx.mission.values, "airview")
         drones = sorted(ctx.reports)
         homes = {i: ctx.mission.initial_positions[i][:2] for i in drones}
         sectors = assign_sectors(homes, split_area(self.area, len(drones)))

@@ -50,6 +50,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from swarmbox.api import (
+    Area,
     DroneAlgorithm,
     DroneContext,
     GroundAlgorithm,
@@ -57,24 +58,12 @@ from swarmbox.api import (
     Setpoint,
     Stage,
     TaskCommand,
+    mission_area,
+    mission_grid,
 )
 
-Area = tuple[float, float, float, float]   # north_min, east_min, north_max, east_max (m)
 Track = tuple[float, float, float, float]  # north, east (m), velocity north, east (m/s)
 QUADRANTS = {"sw": (0, 0), "se": (0, 1), "nw": (1, 0), "ne": (1, 1)}   # (north half, east half)
-
-
-def mission_grid(values: dict[int, tuple[float, ...]]) -> tuple[Area, tuple[int, int]]:
-    """The area and heat-map shape from the mission values 0, 1 and 2."""
-    try:
-        (n0, e0), (n1, e1) = values[0][:2], values[1][:2]
-        rows, cols = int(values[2][0]), int(values[2][1])
-    except (KeyError, IndexError, ValueError):
-        raise ValueError("network: mission.values needs 0: [north_min, east_min], "
-                         "1: [north_max, east_max] and 2: [rows, cols]") from None
-    if n1 <= n0 or e1 <= e0 or rows < 2 or cols < 2:
-        raise ValueError(f"network: bad area {values[0]}..{values[1]} or grid {values[2]}")
-    return (n0, e0, n1, e1), (rows, cols)
 
 
 def phase_at(t_s: float, p: dict) -> str:
@@ -167,7 +156,8 @@ class NetworkGround(GroundAlgorithm):
     """Broadcasts the demand (and positions); measures the demand coverage."""
 
     def exec_once(self, ctx: GroundContext) -> None:
-        self.area, self.shape = mission_grid(dict(ctx.mission.values))
+        self.area = mission_area(ctx.mission.values, "network")
+        self.shape = mission_grid(ctx.mission.values, "network", min_cells=2)
         self.params = schedule(dict(ctx.params), dict(ctx.mission.values))
         self.next_s = 0.0
         self.phase = ""
@@ -253,7 +243,7 @@ class NetworkDrone(DroneAlgorithm):
 
     def exec_once(self, ctx: DroneContext) -> None:
         self.rule = rule = LocalRule.from_params(schedule(dict(ctx.params), dict(ctx.mission.values)))
-        self.area, _ = mission_grid(dict(ctx.mission.values))
+        self.area = mission_area(ctx.mission.values, "network")
         rank = sorted(ctx.mission.initial_positions).index(ctx.id)
         self.alt_m = rule.altitude_m + rule.layer_step_m * (rank % max(1, int(rule.layers)))
         r = rule.sense_radius_m

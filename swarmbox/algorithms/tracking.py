@@ -46,30 +46,19 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from swarmbox.api import (
+    Area,
     DroneAlgorithm,
     DroneContext,
     GroundAlgorithm,
     GroundContext,
     Setpoint,
     TaskCommand,
+    mission_area,
+    mission_grid,
 )
 
 ROLE, STANDBY, ACTIVE = 10, 0, 1
-Area = tuple[float, float, float, float]
 Vec2 = tuple[float, float]
-
-
-def mission_sectors(values: dict[int, tuple[float, ...]]) -> tuple[Area, tuple[int, int]]:
-    """The area and the sector grid from the mission values 0, 1 and 2."""
-    try:
-        (n0, e0), (n1, e1) = values[0][:2], values[1][:2]
-        rows, cols = int(values[2][0]), int(values[2][1])
-    except (KeyError, IndexError, ValueError):
-        raise ValueError("tracking: mission.values needs 0: [north_min, east_min], "
-                         "1: [north_max, east_max] and 2: [rows, cols] (the sector grid)") from None
-    if n1 <= n0 or e1 <= e0 or rows < 1 or cols < 1:
-        raise ValueError(f"tracking: bad area {values[0]}..{values[1]} or grid {values[2]}")
-    return (n0, e0, n1, e1), (rows, cols)
 
 
 def sector_of(pos: Vec2, area: Area, grid: tuple[int, int]) -> int:
@@ -134,7 +123,8 @@ class TrackingGround(GroundAlgorithm):
 
     def prep_once(self, ctx: GroundContext) -> None:
         p = ctx.params
-        self.area, self.grid = mission_sectors(dict(ctx.mission.values))
+        self.area = mission_area(ctx.mission.values, "tracking")
+        self.grid = mission_grid(ctx.mission.values, "tracking")
         self.tracker = int(p["tracker"])
         sentinels = sorted(i for i in ctx.reports if i != self.tracker)
         n_sec = self.grid[0] * self.grid[1]

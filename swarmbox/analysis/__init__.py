@@ -14,11 +14,32 @@ Typical use::
     sweep.summary, sweep.paired, sweep.ranks
 """
 
-from swarmbox.analysis.load import RunData, RunLoadError, find_runs, load_run
-from swarmbox.analysis.report import AnalysisOptions, RunAnalysis, analyze_run
-from swarmbox.analysis.sweep import SweepOptions, SweepResult, analyze_sweep
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+# Names are loaded on first use (PEP 562), so importing one light submodule (the sweep callback
+# that Hydra builds before the runs start) does not load pandas into the runs.
+_EXPORTS = {
+    "RunData": "load", "RunLoadError": "load", "find_runs": "load", "load_run": "load",
+    "AnalysisOptions": "report", "RunAnalysis": "report", "analyze_run": "report",
+    "SweepOptions": "sweep", "SweepResult": "sweep", "analyze_sweep": "sweep",
+}
 
 __all__ = [
     "AnalysisOptions", "RunAnalysis", "RunData", "RunLoadError", "SweepOptions", "SweepResult",
     "analyze_run", "analyze_sweep", "find_runs", "load_run",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

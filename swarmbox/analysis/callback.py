@@ -1,6 +1,6 @@
 """Hydra callback: analyze a sweep when the multirun ends.
 
-Wire it in a config (the lead does this in ``conf/``)::
+``conf/config.yaml`` wires it in::
 
     hydra:
       callbacks:
@@ -8,6 +8,9 @@ Wire it in a config (the lead does this in ``conf/``)::
           _target_: swarmbox.analysis.callback.AnalyzeSweepCallback
           group_by: [algo]
 
+Hydra builds its callbacks in the process that then runs the jobs, so this module imports the
+analysis library (pandas, matplotlib) only in ``on_multirun_end``: runs never load it, and the runtime
+(``swarmbox.run``) never imports ``swarmbox.analysis``.
 The callback never raises: an analysis error is logged and the multirun's own result stands.
 """
 
@@ -21,9 +24,6 @@ from typing import Any
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
-from swarmbox.analysis.outputs import write_sweep
-from swarmbox.analysis.sweep import SweepOptions, analyze_sweep
-
 log = logging.getLogger(__name__)
 
 
@@ -32,13 +32,17 @@ class AnalyzeSweepCallback(Callback):
 
     def __init__(self, group_by: Sequence[str] = ("algo",), n_boot: int = 2000, seed: int = 0,
                  figures: bool = True) -> None:
-        self.options = SweepOptions(group_by=tuple(group_by), n_boot=n_boot, seed=seed)
+        self.group_by, self.n_boot, self.seed = tuple(group_by), n_boot, seed
         self.figures = figures
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         try:
+            from swarmbox.analysis.outputs import write_sweep
+            from swarmbox.analysis.sweep import SweepOptions, analyze_sweep
+
+            options = SweepOptions(group_by=self.group_by, n_boot=self.n_boot, seed=self.seed)
             sweep_dir = Path(str(config.hydra.sweep.dir))
-            result = analyze_sweep(sweep_dir, self.options)
+            result = analyze_sweep(sweep_dir, options)
             write_sweep(result, sweep_dir, with_figures=self.figures)
             for row in result.problems.itertuples(index=False):
                 log.warning("%s: %s: %s", row.severity, row.run, row.problem)

@@ -13,6 +13,8 @@ from typing import NamedTuple
 GROUND_ID = -1
 #: Pseudo-node id under which the simulated network records drops.
 NET_ID = -2
+#: The ``subject`` of an event that is about no node in particular.
+NO_SUBJECT = -3
 
 # Encoded sizes (bytes) of a compact binary encoding: header = msg_id u64, t_sent f64, src i16,
 # dst i16, type u8.

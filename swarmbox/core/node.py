@@ -15,6 +15,7 @@ import numpy as np
 from swarmbox.api import MissionInfo
 from swarmbox.core.clock import NodeClock, TimeSource
 from swarmbox.core.messages import (
+    NO_SUBJECT,
     DescendantState,
     Report,
     TaskAck,
@@ -22,7 +23,6 @@ from swarmbox.core.messages import (
     make_msg_id,
 )
 from swarmbox.core.stages import Stage, check_transition
-from swarmbox.record.schema import NO_SUBJECT
 
 Row = tuple
 _ABORT = int(Stage.ABORT)

@@ -15,6 +15,11 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+from swarmbox.core.messages import GROUND_ID, NET_ID, NO_SUBJECT
+
+# The node-id sentinels are the core's (the ids it writes); NO_SUBJECT is re-exported for log readers.
+__all__ = ["NO_SUBJECT", "SCHEMA_VERSION", "TABLES", "Column", "node_name"]
+
 SCHEMA_VERSION = "1"
 
 
@@ -95,13 +100,10 @@ TABLES: dict[str, tuple[Column, ...]] = {
     ),
 }
 
-NO_SUBJECT = -3
-
-
 def node_name(node_id: int) -> str:
     """Directory name of a node's logs."""
-    if node_id == -1:
+    if node_id == GROUND_ID:
         return "ground"
-    if node_id == -2:
+    if node_id == NET_ID:
         return "net"
     return f"drone_{node_id}"

@@ -35,18 +35,3 @@ class SweepSummary(Callback):
         if failed:
             sys.exit(1)
 
-
-class AnalyzeSweep(Callback):
-    """After a multirun: tables and figures for the whole sweep (``swarmbox.analysis``).
-
-    The analysis library is imported only here, at the end of a sweep, so runs themselves never
-    load pandas or matplotlib. Switch it off with ``~hydra.callbacks.analyze`` on the command line.
-    """
-
-    def __init__(self, group_by: list[str] | tuple[str, ...] = ("algo",), figures: bool = True) -> None:
-        self.group_by, self.figures = tuple(group_by), figures
-
-    def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
-        from swarmbox.analysis.callback import AnalyzeSweepCallback
-
-        AnalyzeSweepCallback(group_by=self.group_by, figures=self.figures).on_multirun_end(config, **kwargs)

@@ -100,7 +100,8 @@ class SimBackend:
         self._tel: _TelemetryLists | None = None
         self._supervised: set[int] = set()
         self._closed = False
-        self.vehicles = [SimVehicle(self, i, (h[0], h[1], h[2])) for i, h in enumerate(homes.tolist())]
+        self.vehicles = [SimVehicle(self, i, (h[0], h[1], h[2]), ctrl=self.ctrl, params=p, limits=limits)
+                         for i, h in enumerate(homes.tolist())]
 
     def _init_state(self, homes: np.ndarray) -> None:
         """Truth, estimate and scratch arrays; every vehicle on the ground at its home."""
@@ -251,7 +252,7 @@ class SimBackend:
             if not self.vehicles[i].supervise(self.t_s):
                 self._supervised.discard(i)
 
-    # ---- services for SimVehicle --------------------------------------------------------------
+    # ---- services for SimVehicle (the SimFleet protocol) ------------------------------------------
     def supervise(self, i: int) -> None:
         """Have the supervisor watch vehicle ``i`` from the next step on."""
         self._supervised.add(i)
@@ -267,6 +268,11 @@ class SimBackend:
         if not self._gnss.ready(self.t_s)[i]:
             return "no GNSS fix yet" if self._gnss.seq[i] == 0 else "estimator initialising"
         return ""
+
+    def estimate_ned(self, i: int) -> tuple[float, float, float]:
+        """Vehicle ``i``'s estimated position (n, e, d)."""
+        n, e, d = self._est[:, i].tolist()
+        return (n, e, d)
 
     def speed_m_s(self, i: int) -> float:
         """Vehicle ``i``'s true 3-D speed."""

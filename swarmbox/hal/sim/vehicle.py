@@ -1,23 +1,63 @@
 """One simulated vehicle's autopilot: commands, flight modes and the automatic-mode supervisor.
 
-The numeric state lives in the fleet's arrays (:class:`swarmbox.hal.sim.backend.SimBackend`); this class
-holds the discrete state PX4's commander would (armed, mode, RTL phase, timers) and turns commands
-into controller targets. Commands take effect at the next ``step``.
+The numeric state lives in the fleet's arrays; this class holds the discrete state PX4's commander
+would (armed, mode, RTL phase, timers) and turns commands into controller targets. Commands take
+effect at the next ``step``.
+
+A vehicle sees its fleet only through :class:`SimFleet` (what one vehicle may ask of the fleet it
+flies in), so this module depends on the fleet's interface, not on
+:class:`swarmbox.hal.sim.backend.SimBackend`, which builds the vehicles and implements that interface.
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 from swarmbox.api import FlightMode, Setpoint, SetpointKind, Telemetry
-from swarmbox.hal.safety import check_setpoint
-
-if TYPE_CHECKING:
-    from swarmbox.hal.sim.backend import SimBackend
+from swarmbox.hal.safety import SafetyLimits, check_setpoint
+from swarmbox.hal.sim.control import CascadedController
+from swarmbox.hal.sim.params import SimParams
 
 Vec3 = tuple[float, float, float]
 _AUTO = (FlightMode.TAKEOFF, FlightMode.LAND, FlightMode.RTL)
+
+
+class SimFleet(Protocol):
+    """What a :class:`SimVehicle` asks of the fleet it flies in (one vehicle = index ``i``)."""
+
+    @property
+    def t_s(self) -> float:
+        """The fleet's simulated time (s)."""
+        ...
+
+    def telemetry_of(self, i: int) -> Telemetry:
+        """Vehicle ``i``'s live telemetry."""
+        ...
+
+    def estimate_ned(self, i: int) -> Vec3:
+        """Vehicle ``i``'s estimated position (the one its controller flies on)."""
+        ...
+
+    def speed_m_s(self, i: int) -> float:
+        """Vehicle ``i``'s true 3-D speed."""
+        ...
+
+    def on_ground(self, i: int) -> bool:
+        """Whether vehicle ``i`` rests on the ground."""
+        ...
+
+    def arm_blocker(self, i: int) -> str:
+        """Why vehicle ``i`` cannot arm now ("" if it can)."""
+        ...
+
+    def supervise(self, i: int) -> None:
+        """Call ``supervise`` on vehicle ``i`` at every step from the next one on, until it returns False."""
+        ...
+
+    def emit(self, i: int, kind: str, name: str, data: dict[str, Any]) -> None:
+        """Record a vehicle event (``kind``/``name`` as :class:`swarmbox.hal.vehicle.VehicleEvent`)."""
+        ...
 
 
 class SimVehicle:
@@ -29,8 +69,10 @@ class SimVehicle:
     land, disarm). A crashed vehicle ignores every command and its telemetry is frozen.
     """
 
-    def __init__(self, backend: SimBackend, drone_id: int, home_ned_m: Vec3) -> None:
-        self._b = backend
+    def __init__(self, fleet: SimFleet, drone_id: int, home_ned_m: Vec3, *, ctrl: CascadedController,
+                 params: SimParams, limits: SafetyLimits) -> None:
+        self._fleet = fleet
+        self._ctrl, self._p, self._limits = ctrl, params, limits
         self.drone_id = drone_id
         self.home_ned_m: Vec3 = home_ned_m
         self.mode = FlightMode.IDLE
@@ -47,19 +89,19 @@ class SimVehicle:
 
     # ---- Vehicle protocol ---------------------------------------------------------------------
     def telemetry(self) -> Telemetry:
-        return self.frozen if self.frozen is not None else self._b.telemetry_of(self.drone_id)
+        return self.frozen if self.frozen is not None else self._fleet.telemetry_of(self.drone_id)
 
     def arm(self) -> None:
         if self._refuse("arm") or self.armed:
             return
-        reason = self._b.arm_blocker(self.drone_id)
+        reason = self._fleet.arm_blocker(self.drone_id)
         if reason:
             self._deny("arm", reason)
             return
-        self.armed, self._arm_t_s, self._been_airborne = True, self._b.t_s, False
-        self._b.ctrl.reset_integrator(self.drone_id)
+        self.armed, self._arm_t_s, self._been_airborne = True, self._fleet.t_s, False
+        self._ctrl.reset_integrator(self.drone_id)
         self._set_mode(FlightMode.IDLE)
-        self._b.supervise(self.drone_id)
+        self._fleet.supervise(self.drone_id)
 
     def disarm(self) -> None:
         if self._refuse("disarm") or not self.armed:
@@ -80,25 +122,25 @@ class SimVehicle:
             self._deny("takeoff", f"bad altitude {alt_m!r}")
             return
         n, e, _ = self._est()
-        self._takeoff_d_m = self.home_ned_m[2] - min(alt, self._b.limits.max_alt_m)
+        self._takeoff_d_m = self.home_ned_m[2] - min(alt, self._limits.max_alt_m)
         if self._landed():
-            self._b.ctrl.reset_integrator(self.drone_id)
-        self._b.ctrl.set_position(self.drone_id, (n, e, self._takeoff_d_m),
-                                  vmax_up_m_s=self._b.params.mpc_tko_speed_m_s)
+            self._ctrl.reset_integrator(self.drone_id)
+        self._ctrl.set_position(self.drone_id, (n, e, self._takeoff_d_m),
+                                  vmax_up_m_s=self._p.mpc_tko_speed_m_s)
         self._set_mode(FlightMode.TAKEOFF)
 
     def setpoint(self, sp: Setpoint) -> None:
         if self._refuse("setpoint"):
             return
-        verdict = check_setpoint(sp, self.telemetry(), self._b.limits)
+        verdict = check_setpoint(sp, self.telemetry(), self._limits)
         if verdict.action != "ok":
-            self._b.emit(self.drone_id, "safety", "setpoint_" + verdict.action,
+            self._fleet.emit(self.drone_id, "safety", "setpoint_" + verdict.action,
                          {"reason": verdict.reason, "kind": sp.kind.name.lower(),
                           "requested": [float(x) for x in sp.ned]})
         sp = verdict.setpoint
         if sp is None or (self.mode is FlightMode.OFFBOARD and sp == self._last_sp):
             return
-        ctrl, i = self._b.ctrl, self.drone_id
+        ctrl, i = self._ctrl, self.drone_id
         if sp.kind is SetpointKind.POSITION:
             ctrl.set_position(i, sp.ned)
         elif sp.kind is SetpointKind.VELOCITY:
@@ -113,7 +155,7 @@ class SimVehicle:
         if self._refuse("land"):
             return
         n, e, _ = self._est()
-        self._b.ctrl.set_descent(self.drone_id, n, e, self._b.params.mpc_land_speed_m_s)
+        self._ctrl.set_descent(self.drone_id, n, e, self._p.mpc_land_speed_m_s)
         self._set_mode(FlightMode.LAND)
 
     def return_to_launch(self) -> None:
@@ -123,20 +165,20 @@ class SimVehicle:
         self._set_mode(FlightMode.RTL)
         if self._landed():
             self._rtl_phase = "land"
-            self._b.ctrl.set_descent(self.drone_id, n, e, self._b.params.mpc_land_speed_m_s)
+            self._ctrl.set_descent(self.drone_id, n, e, self._p.mpc_land_speed_m_s)
             return
         self._rtl_phase = "climb"
-        self._takeoff_d_m = min(d, self.home_ned_m[2] - self._b.params.rtl_alt_m)
-        self._b.ctrl.set_position(self.drone_id, (n, e, self._takeoff_d_m))
+        self._takeoff_d_m = min(d, self.home_ned_m[2] - self._p.rtl_alt_m)
+        self._ctrl.set_position(self.drone_id, (n, e, self._takeoff_d_m))
 
     def hold(self) -> None:
         if self._refuse("hold"):
             return
         if self._landed():   # PX4 idles on the ground in Hold
             self._set_mode(FlightMode.HOLD)
-            self._b.ctrl.set_thrust_off(self.drone_id)
+            self._ctrl.set_thrust_off(self.drone_id)
             return
-        self._b.ctrl.set_velocity(self.drone_id, (0.0, 0.0, 0.0))   # brake, then hold where stopped
+        self._ctrl.set_velocity(self.drone_id, (0.0, 0.0, 0.0))   # brake, then hold where stopped
         self._braking = True
         self._set_mode(FlightMode.HOLD)
 
@@ -149,18 +191,18 @@ class SimVehicle:
         if not self._been_airborne:
             if not landed:
                 self._been_airborne = True
-            elif t_s - self._arm_t_s >= self._b.params.preflight_disarm_s:
+            elif t_s - self._arm_t_s >= self._p.preflight_disarm_s:
                 self._disarm("no takeoff")
                 return False
         if self.mode is FlightMode.TAKEOFF:
-            if abs(self._est()[2] - self._takeoff_d_m) <= self._b.params.takeoff_acceptance_m:
+            if abs(self._est()[2] - self._takeoff_d_m) <= self._p.takeoff_acceptance_m:
                 n, e, _ = self._est()
-                self._b.ctrl.set_position(self.drone_id, (n, e, self._takeoff_d_m))
+                self._ctrl.set_position(self.drone_id, (n, e, self._takeoff_d_m))
                 self._set_mode(FlightMode.HOLD)
         elif self.mode is FlightMode.HOLD and self._braking:
-            if self._b.speed_m_s(self.drone_id) < self._b.params.hold_brake_speed_m_s:
+            if self._fleet.speed_m_s(self.drone_id) < self._p.hold_brake_speed_m_s:
                 self._braking = False
-                self._b.ctrl.set_position(self.drone_id, self._est())
+                self._ctrl.set_position(self.drone_id, self._est())
         elif self.mode is FlightMode.RTL and self._rtl_phase != "land":
             self._rtl_step()
         elif self.mode is FlightMode.LAND or self.mode is FlightMode.RTL:
@@ -168,36 +210,36 @@ class SimVehicle:
         return self.armed and (self.mode in _AUTO or self._braking or not self._been_airborne)
 
     def _rtl_step(self) -> None:
-        p, (n, e, d) = self._b.params, self._est()
+        p, (n, e, d) = self._p, self._est()
         hn, he = self.home_ned_m[0], self.home_ned_m[1]
         if self._rtl_phase == "climb" and d <= self._takeoff_d_m + p.takeoff_acceptance_m:
             self._rtl_phase = "return"
-            self._b.ctrl.set_position(self.drone_id, (hn, he, self._takeoff_d_m),
+            self._ctrl.set_position(self.drone_id, (hn, he, self._takeoff_d_m),
                                       vmax_h_m_s=p.rtl_cruise_speed_m_s)
         elif self._rtl_phase == "return" and math.hypot(n - hn, e - he) <= p.rtl_acceptance_m:
             self._rtl_phase = "land"
             self._ground_since_s = None
-            self._b.ctrl.set_descent(self.drone_id, hn, he, p.mpc_land_speed_m_s)
+            self._ctrl.set_descent(self.drone_id, hn, he, p.mpc_land_speed_m_s)
 
     def _landing_step(self, t_s: float, landed: bool) -> None:
         if not landed:
             self._ground_since_s = None
         elif self._ground_since_s is None:
             self._ground_since_s = t_s
-        elif t_s - self._ground_since_s >= self._b.params.land_disarm_delay_s:
+        elif t_s - self._ground_since_s >= self._p.land_disarm_delay_s:
             self._disarm("landed")
 
     # ---- helpers ------------------------------------------------------------------------------
     def crash(self, last: Telemetry) -> None:
         """Freeze telemetry at ``last`` and cut the motors for good."""
         self.frozen = last
-        self._b.ctrl.set_thrust_off(self.drone_id)
+        self._ctrl.set_thrust_off(self.drone_id)
 
     def _disarm(self, reason: str) -> None:
         self.armed = False
-        self._b.ctrl.set_thrust_off(self.drone_id)
+        self._ctrl.set_thrust_off(self.drone_id)
         self._set_mode(FlightMode.IDLE)
-        self._b.emit(self.drone_id, "command", "disarmed", {"reason": reason})
+        self._fleet.emit(self.drone_id, "command", "disarmed", {"reason": reason})
 
     def _set_mode(self, mode: FlightMode) -> None:
         if mode is not self.mode:
@@ -205,7 +247,7 @@ class SimVehicle:
         self.mode, self._last_sp, self._ground_since_s = mode, None, None
         self._braking = self._braking and mode is FlightMode.HOLD
         if mode in _AUTO or self._braking or (self.armed and not self._been_airborne):
-            self._b.supervise(self.drone_id)
+            self._fleet.supervise(self.drone_id)
 
     def _refuse(self, cmd: str) -> bool:
         """Deny ``cmd`` when crashed or (except arm) disarmed; True when denied."""
@@ -222,11 +264,10 @@ class SimVehicle:
         if (cmd, reason) not in self._noted:
             self._noted.add((cmd, reason))
             name = "setpoint_ignored" if cmd == "setpoint" else cmd + "_denied"
-            self._b.emit(self.drone_id, "command", name, {"reason": reason})
+            self._fleet.emit(self.drone_id, "command", name, {"reason": reason})
 
     def _landed(self) -> bool:
-        return self._b.on_ground(self.drone_id)
+        return self._fleet.on_ground(self.drone_id)
 
     def _est(self) -> Vec3:
-        n, e, d = self._b.est_pos_ned_m[self.drone_id].tolist()
-        return (n, e, d)
+        return self._fleet.estimate_ned(self.drone_id)

@@ -1,4 +1,4 @@
-"""``python -m swarmbox.loc``: lines of code of the algorithm ports, beside the paper's Table 1 (RQ1).
+"""``python experiments/rq1_ports/loc.py``: lines of code of the algorithm ports beside paper Table 1 (RQ1).
 
 Counting convention (cloc-style, as the reference reconciliation of Table 1 does):
 
@@ -37,7 +37,7 @@ from pathlib import Path
 
 import yaml
 
-ROOT = Path(__file__).resolve().parent   # holds algorithms/ and conf/
+ROOT = Path(__file__).resolve().parents[2] / "swarmbox"   # the package: holds algorithms/ and conf/
 PACKAGE = "swarmbox.algorithms"
 
 #: Paper Table 1: (legacy boilerplate, legacy core, C++ port boilerplate, C++ port core) per
@@ -258,8 +258,10 @@ def report(root: Path = ROOT) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m swarmbox.loc", description=__doc__.splitlines()[0])
-    parser.add_argument("--root", type=Path, default=ROOT, help="project root (default: this checkout)")
+    parser = argparse.ArgumentParser(prog="python experiments/rq1_ports/loc.py",
+                                     description=__doc__.splitlines()[0])
+    parser.add_argument("--root", type=Path, default=ROOT,
+                        help="the package directory holding algorithms/ and conf/ (default: this checkout's)")
     args = parser.parse_args(argv)
     print(report(args.root.resolve()))
     return 0

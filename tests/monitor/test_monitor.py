@@ -58,3 +58,47 @@ def test_live_stream_to_a_rerun_recording(run, tmp_path):
     assert {f"/world/links/ground_drone_{i}" for i in range(4)} <= entities
     flat = " ".join(str(t) for t in texts)
     assert "stage TERMINATION" in flat and "proximity 0-1 over" in flat
+
+
+@pytest.mark.slow
+def test_live_stream_to_a_rerun_server_over_grpc(run, tmp_path):
+    """The same stream to a real Rerun server on 127.0.0.1, which saves what it receives."""
+    import signal
+    import socket
+    import subprocess
+    import sys
+    import time
+    import warnings
+
+    import rerun.chunk as rrc
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    saved = tmp_path / "server.rrd"
+    server = subprocess.Popen([sys.executable, "-m", "rerun", "--bind", "127.0.0.1", "--port", str(port),
+                               "--save", str(saved)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            with socket.socket() as probe:
+                if probe.connect_ex(("127.0.0.1", port)) == 0:
+                    break
+            time.sleep(0.2)
+        manifest, _ = run(*CROSSING, "run.monitor=off", f"run.rerun=rerun+http://127.0.0.1:{port}/proxy")
+        assert manifest["status"] == "ok" and manifest["monitor"]["rerun_frames"] >= 1
+        time.sleep(2)
+    finally:
+        server.send_signal(signal.SIGINT)
+        try:
+            server.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            server.kill()
+            server.wait()
+    rows: dict[str, int] = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # the server's file is a plain stream (no footer)
+        for chunk in rrc.RrdReader(saved).stream():
+            rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+    assert all(rows.get(f"/world/drones/{i}", 0) == manifest["monitor"]["rerun_frames"] for i in range(4))
+    assert rows["/events"] >= 4

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 
-from swarmbox.api import DroneAlgorithm, DroneContext, ProxAlert, Setpoint
+from swarmbox.api import DescendantState, DroneAlgorithm, DroneContext, Setpoint
 
 
 class CrossingDrone(DroneAlgorithm):
@@ -38,8 +38,8 @@ class CrossingDrone(DroneAlgorithm):
     def exec_complete(self, ctx: DroneContext) -> bool:
         return ctx.has_reached(self.target, d_m=0.5)
 
-    def on_prox_alert(self, ctx: DroneContext, alert: ProxAlert) -> None:
-        for other in alert.neighbours:
+    def on_prox_alert(self, ctx: DroneContext, neighbours: tuple[DescendantState, ...]) -> None:
+        for other in neighbours:
             if other.drone_id not in self.warned:
                 self.warned.add(other.drone_id)
                 ctx.mark("near_miss_warning", other=other.drone_id,

@@ -10,12 +10,23 @@ how an avoidance algorithm would hook in.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 from swarmbox.api import DescendantState, DroneAlgorithm, DroneContext, Setpoint
 
 
+@dataclass
+class CrossingParams:
+    """Typed ``params`` (see ``conf/algo/crossing.yaml``)."""
+
+    speed_m_s: float = 4.0   # m/s, cruise speed along the straight line
+    depart_s: float = 6.0    # s into EXECUTION: every drone leaves its climb point together
+
+
 class CrossingDrone(DroneAlgorithm):
     """Params: ``speed_m_s`` (cruise), ``depart_s`` (s of EXECUTION before leaving)."""
+
+    Params = CrossingParams
 
     def exec_once(self, ctx: DroneContext) -> None:
         tn, te, alt = ctx.mission.values[ctx.id][:3]

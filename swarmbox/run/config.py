@@ -114,6 +114,7 @@ class RunConfig:
     # stream live to Rerun: a viewer's URL (rerun+http://127.0.0.1:9876/proxy) or an .rrd path
     rerun: Optional[str] = None
     out_dir: Optional[str] = None   # default: Hydra's output directory
+    resume: bool = False            # skip a run whose directory holds a finished run (ok/aborted)
 
 
 @dataclass

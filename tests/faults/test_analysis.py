@@ -35,6 +35,7 @@ def test_slow_drift_is_followed_by_the_estimator_and_only_swarmbox_sees_it(run):
     assert not rows.loc["baseline", "detected"]
 
 
+@pytest.mark.slow
 def test_latency_is_recovered_and_attributed(run):
     _, d = run(*HOVER, "fault=latency", "fault.latency_ms=15", *WINDOW)
     _, rows = rows_of(d)
@@ -45,6 +46,7 @@ def test_latency_is_recovered_and_attributed(run):
     assert math.isfinite(sb["sigma_a"]) and sb["sigma_a"] > 0   # 4 drones: the outlier lifts q3
 
 
+@pytest.mark.slow
 def test_loss_is_recovered_and_attributed(run):
     _, d = run(*HOVER, "fault=packet_loss", "fault.loss_prob=0.4", *WINDOW)
     _, rows = rows_of(d)
@@ -54,6 +56,7 @@ def test_loss_is_recovered_and_attributed(run):
     assert sb["sigma_a"] > 0       # (inf with 9 drones: the quartiles then exclude the one outlier)
 
 
+@pytest.mark.slow
 def test_tables_and_figures_from_a_sweep_directory(run, tmp_path):
     for loss in (0.2, 0.4):
         run(*HOVER, "fault=packet_loss", f"fault.loss_prob={loss}", *WINDOW, name=f"sweep/loss{loss}")

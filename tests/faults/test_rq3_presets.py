@@ -27,6 +27,7 @@ def test_preset_composes_the_rq3_set_up(kind, model):
     (["+experiment=rq3_drift", "fault.rate_m_s=4.0", "fault.targets=8"], "gps_drift"),
     (["+experiment=rq3_loss", "fault.loss_prob=0.3", "fault.targets=3"], "packet_loss"),
 ])
+@pytest.mark.slow
 def test_one_rq3_run_is_diagnosed_on_its_target(run, overrides, fault):
     manifest, d = run(*overrides)
     assert manifest["status"] == "ok", manifest["reason"]

@@ -17,6 +17,7 @@ it freezes when a link falls silent.
 
 from __future__ import annotations
 
+import logging
 import math
 import sys
 import time
@@ -40,6 +41,9 @@ Vec3 = tuple[float, float, float]
 DEFAULT_RATES_HZ = {"LOCAL_POSITION_NED": 30.0, "GLOBAL_POSITION_INT": 10.0, "GPS_RAW_INT": 10.0,
                     "SYS_STATUS": 2.0, "EXTENDED_SYS_STATE": 2.0}
 GROUND_TRUTH_RATE_HZ = 10.0
+WAIT_REPORT_S = 5.0        # a progress line this often while waiting for vehicles
+
+log = logging.getLogger(__name__)
 #: maps a vehicle's boot time (s) to its drone node's local clock (s), elementwise
 BootClock = Callable[[np.ndarray], np.ndarray]
 
@@ -226,7 +230,7 @@ class Px4Backend:
         return emit
 
     def _wait_for(self, what: str, done: Callable[[Px4Vehicle], bool], timeout_s: float) -> None:
-        start = last = time.monotonic()
+        start = last = reported = time.monotonic()
         while True:
             now = time.monotonic()
             self._clock_s += (now - last) * self.params.speed
@@ -235,6 +239,10 @@ class Px4Backend:
                 v.service(self._clock_s)
             if all(done(v) for v in self.vehicles):
                 return
+            if now - reported >= WAIT_REPORT_S:   # never silent while waiting for vehicles
+                reported = now
+                log.info("px4 backend: %d/%d vehicles %s after %.0f s (timeout %g s)",
+                         sum(map(done, self.vehicles)), len(self.vehicles), what, now - start, timeout_s)
             if self.launcher is not None:
                 self.launcher.check()
             if now - start > timeout_s:

@@ -6,7 +6,7 @@ from collections.abc import Sequence
 from typing import ClassVar, final
 
 from swarmbox.api.context import DroneContext, GroundContext
-from swarmbox.api.types import InferiorReport, Setpoint, Stage, Task
+from swarmbox.api.types import DescendantState, InferiorReport, Setpoint, Stage, Task
 
 
 class DroneAlgorithm:
@@ -25,6 +25,9 @@ class DroneAlgorithm:
       reliable tasks arrive exactly once, in send order, and never before the ``*_once`` hook of
       the stage the sender was in when it sent them.
     - ``on_report(ctx, report)`` — for every :class:`InferiorReport` delivered from a direct inferior.
+    - ``on_prox_alert(ctx, neighbours)`` — for every proximity alert from the ground: every tick
+      while other drones are within ``run.proximity_m`` (their ids and reported positions), then
+      once with none (all clear). ``ctx.proximity`` holds the latest neighbours.
     - ``successors`` -> Sequence[int] — the fallback superiors this drone advertises to its own
       inferiors; default: its own superior.
 
@@ -60,6 +63,9 @@ class DroneAlgorithm:
 
     def on_report(self, ctx: DroneContext, report: InferiorReport) -> None:
         """Called for every Report delivered from a direct inferior."""
+
+    def on_prox_alert(self, ctx: DroneContext, neighbours: tuple[DescendantState, ...]) -> None:
+        """Called for every proximity alert delivered (empty ``neighbours``: all clear)."""
 
     def successors(self, ctx: DroneContext) -> Sequence[int]:
         return (ctx.superior,)

@@ -143,7 +143,10 @@ class DroneContext(_Context):
 
     @property
     def proximity(self) -> tuple[DescendantState, ...]:
-        """Drones the ground saw within ``run.proximity_m`` of this one (its latest ProxAlert)."""
+        """Drones the ground saw within ``run.proximity_m`` of this one (its latest ProxAlert).
+
+        Empty once the ground sends its all-clear, or when no alert came for ``lost_inferior_ticks``.
+        """
         return self._node.proximity
 
     @property

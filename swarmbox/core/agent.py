@@ -46,6 +46,7 @@ class AgentNode(Node):
         self.report_data = ""
         self.last_task: Task | None = None
         self.proximity: tuple[DescendantState, ...] = ()
+        self._prox_tick = 0
         self.peer_view: dict[int, PeerState] = {}
         self._own: DroneState | None = None
         self._sup_silent, self._heard_superior = 0, False
@@ -106,10 +107,16 @@ class AgentNode(Node):
             elif kind is TaskAck:
                 self.on_ack(msg)
             elif kind is ProxAlert:
-                self.proximity = msg.neighbours
+                self._on_prox_alert(msg)
         inbox.clear()
         for src in self._window.holding():   # a stage change may have released held tasks
             self._deliver_ready(src)
+        if self.proximity and self.time.tick - self._prox_tick > self.timing.lost_inferior_ticks:
+            self.proximity = ()   # the ground's all-clear was lost, or the ground fell silent
+
+    def _on_prox_alert(self, alert: ProxAlert) -> None:
+        self.proximity, self._prox_tick = alert.neighbours, self.time.tick   # empty: all clear
+        call_hook(self, "on_prox_alert", self.algorithm.on_prox_alert, self.ctx, alert.neighbours)
 
     def _on_task(self, cmd: TaskCommand) -> None:
         if cmd.src == self.superior and cmd.stage > self.stage and self.stage not in TERMINAL:

@@ -13,17 +13,25 @@ drones remain, instead of stalling.
 
 from __future__ import annotations
 
-import functools
-import math
-
-import numpy as np
+from typing import Protocol
 
 from swarmbox.api import DescendantState, GroundAlgorithm, GroundContext
 from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck
 from swarmbox.core.node import Node, call_hook
+from swarmbox.core.proximity import DIRECT_PAIRS_UP_TO, Episode, ProximityTracker, kd_tree
 from swarmbox.core.stages import TERMINAL, Stage
 
 _ZERO3 = (0.0, 0.0, 0.0)
+
+
+class GroundObserver(Protocol):
+    """Watches the ground node from outside the swarm logic (e.g. the live monitor).
+
+    Called at the end of every ground tick, on the tick thread: it must return quickly and must not
+    change the node.
+    """
+
+    def after_tick(self, ground: GroundNode) -> None: ...
 
 
 class GroundNode(Node):
@@ -33,8 +41,11 @@ class GroundNode(Node):
         self.ctx = GroundContext(self)
         self.reason = ""
         self._satisfied = True   # the ground algorithm's *_complete verdict on its latest loop tick
-        if self.mission.swarm_size > _DIRECT_PAIRS_UP_TO:
-            _kd_tree()   # load scipy now, not inside the first timed tick
+        self.proximity = ProximityTracker(self.timing.proximity_m, self.timing.proximity_window_s)
+        self.prox_pairs: dict[tuple[int, int], float] = {}   # alerted pair -> distance, this tick
+        self.observer: GroundObserver | None = None
+        if self.mission.swarm_size > DIRECT_PAIRS_UP_TO:
+            kd_tree()   # load scipy now, not inside the first timed tick
 
     # -- the tick -------------------------------------------------------------------------------
     def tick(self) -> None:
@@ -53,6 +64,8 @@ class GroundNode(Node):
             self._satisfied = call_hook(self, "exec_loop/exec_complete", self.algorithm.run_stage, stage,
                                         self.ctx)
         self.retry_tasks()
+        if self.observer is not None:
+            self.observer.after_tick(self)
 
     def _drain_inbox(self) -> None:
         inbox = self.inbox
@@ -108,42 +121,44 @@ class GroundNode(Node):
                       for r in self.alive_reports().values())
         if settled or self.stage_timed_out():
             self.finished = True
+            for ep in self.proximity.active.values():   # still close when the mission ends
+                self._log_episode("prox_end", ep)
+            self.proximity.active.clear()
 
     # -- views and monitors ---------------------------------------------------------------------
     def swarm_view(self) -> dict[int, DescendantState]:
         return {d.drone_id: d for d in self.descendants()}
 
     def _proximity_alerts(self) -> None:
-        """ProxAlert to every direct inferior with another known drone within ``proximity_m``."""
+        """ProxAlert to every alive direct inferior in an alerted pair; episodes logged as events.
+
+        A drone whose last pair ended gets one empty ProxAlert (all clear).
+        """
         view = self.descendants()
-        if len(view) < 2:
+        before = {d for pair in self.prox_pairs for d in pair}
+        self.prox_pairs, started, ended = self.proximity.update(self.clock.now(), view)
+        for ep in started:
+            self._log_episode("prox_start", ep)
+        for ep in ended:
+            self._log_episode("prox_end", ep)
+        if not self.prox_pairs and not before:
             return
+        by_id = {d.drone_id: d for d in view}
         near: dict[int, list[DescendantState]] = {}
-        for a, b in _close_pairs(view, self.timing.proximity_m):
-            near.setdefault(view[a].drone_id, []).append(view[b])
-            near.setdefault(view[b].drone_id, []).append(view[a])
-        for drone_id, others in near.items():
-            if drone_id in self.inferiors and self.inferiors[drone_id].alive:
+        for a, b in self.prox_pairs:
+            near.setdefault(a, []).append(by_id[b])
+            near.setdefault(b, []).append(by_id[a])
+        for drone_id in sorted(near.keys() | before):
+            inf = self.inferiors.get(drone_id)
+            if inf is not None and inf.alive:
                 self.net.send(ProxAlert(self.next_msg_id(), self.clock.now(), GROUND_ID, drone_id,
-                                        tuple(others)), drone_id)
+                                        tuple(near.get(drone_id, ()))), drone_id)
 
-
-_DIRECT_PAIRS_UP_TO = 24   # drones; above, proximity pairs come from a k-d tree
-
-
-@functools.cache
-def _kd_tree() -> type:
-    """scipy's cKDTree, imported on first use: small swarms never need it, so runs start faster."""
-    from scipy.spatial import cKDTree
-
-    return cKDTree
-
-
-def _close_pairs(view: tuple[DescendantState, ...], limit_m: float) -> list[tuple[int, int]]:
-    """Index pairs closer than ``limit_m`` (3-D): direct for small swarms, a k-d tree for large."""
-    if len(view) <= _DIRECT_PAIRS_UP_TO:
-        return [(a, b) for a in range(len(view)) for b in range(a + 1, len(view))
-                if math.dist(view[a].pos_ned_m, view[b].pos_ned_m) < limit_m]
-    pts = np.array([d.pos_ned_m for d in view])
-    pairs = _kd_tree()(pts).query_pairs(limit_m, output_type="ndarray")
-    return sorted(map(tuple, pairs.tolist()))
+    def _log_episode(self, name: str, ep: Episode) -> None:
+        a, b = ep.pair
+        fields = dict(pair=[a, b], start_t_s=ep.start_t_s, predicted=ep.predicted,
+                      distance_m=round(ep.start_distance_m, 3))
+        if name == "prox_end":
+            fields.update(min_distance_m=round(ep.min_distance_m, 3), breached=ep.breached,
+                          breach_t_s=ep.breach_t_s, duration_s=round(self.clock.now() - ep.start_t_s, 6))
+        self.event("proximity", name, a, **fields)

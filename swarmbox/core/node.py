@@ -51,6 +51,7 @@ class CoreTiming:
     task_max_retries: int = 40
     arm_retry_ticks: int = 20
     proximity_m: float = 2.0
+    proximity_window_s: float = 0.0   # look-ahead of the proximity alerts (0: current distance only)
     min_alive: int = 1
     state_every_ticks: int = 1
     timeouts_s: Mapping[str, float] = field(default_factory=lambda: {
@@ -63,10 +64,11 @@ class AlgorithmError(RuntimeError):
 
 
 class _Inferior:
-    __slots__ = ("report", "silent_ticks", "alive")
+    __slots__ = ("report", "silent_ticks", "alive", "received")
 
     def __init__(self, report: Report) -> None:
         self.report, self.silent_ticks, self.alive = report, 0, True
+        self.received = 1   # Reports received: the live monitor's loss estimate
 
 
 class Node:
@@ -128,6 +130,7 @@ class Node:
                 inf.alive = True
                 self.event("topology", "inferior_rejoined", rep.src)
             inf.report, inf.silent_ticks = rep, 0
+            inf.received += 1
         self._alive[rep.src] = InferiorReport(rep.src, STAGE_OF[rep.stage], rep.complete, rep.pos_ned_m,
                                               rep.vel_ned_m_s, rep.data, self.clock.now())
         return True

@@ -83,7 +83,7 @@ TABLES: dict[str, tuple[Column, ...]] = {
     "events": _cols(
         _T, _TICK,
         ("kind", "string", "", "marker | progress | safety | collision | command | estimator | link | "
-                               "fault | topology | failsafe | error"),
+                               "fault | topology | failsafe | proximity | error"),
         ("name", "string", "", "what happened"),
         ("subject", "int16", "", "drone the event is about (-1 ground, -3 none)"),
         ("data", "string", "", "JSON object with the event's fields"),

@@ -54,7 +54,8 @@ def timing_of(cfg: DictConfig) -> CoreTiming:
         tick_s=1.0 / r.tick_hz, lost_inferior_ticks=r.lost_inferior_ticks,
         lost_superior_ticks=r.lost_superior_ticks, task_retry_ticks=r.task_retry_ticks,
         task_max_retries=r.task_max_retries, arm_retry_ticks=r.arm_retry_ticks,
-        proximity_m=r.proximity_m, min_alive=r.min_alive, state_every_ticks=max(1, r.state_every_ticks),
+        proximity_m=r.proximity_m, proximity_window_s=r.proximity_window_s, min_alive=r.min_alive,
+        state_every_ticks=max(1, r.state_every_ticks),
         timeouts_s=dict(OmegaConf.to_container(r.timeouts_s, resolve=True)))
 
 
@@ -99,21 +100,26 @@ def medium_of(cfg: DictConfig, time: TimeSource, seed: int, recorder: Recorder,
                      drop_log=recorder.node(NET_ID).appender("messages"))
 
 
+def backend_class(cfg: DictConfig) -> type:
+    target = cfg.backend.get("_target_")
+    if not target:
+        raise ConfigError("backend: no _target_ (the backend class) given")
+    try:
+        return get_class(target)
+    except Exception as exc:
+        raise ConfigError(f"backend._target_: cannot import '{target}': {exc}") from exc
+
+
 def backend_of(cfg: DictConfig, mission: Mission, tick_s: float, seed: int, run_dir: Path) -> Any:
     params = OmegaConf.to_container(cfg.backend, resolve=True)
-    target = params.pop("_target_", None)
+    params.pop("_target_", None)
     params.pop("name", None)
     if isinstance(params.get("sim"), dict):   # typed mavsim ``sim`` node: unset keys are None
         params["sim"] = {k: v for k, v in params["sim"].items() if v is not None}
-    if not target:
-        raise ConfigError("backend: no _target_ (the backend class) given")
     s = cfg.run.safety
     limits = SafetyLimits(s.max_speed_m_s, s.max_accel_m_s2, s.geofence_radius_m, s.max_alt_m, s.max_jump_m)
     homes = [mission.initial_positions[i] for i in mission.drone_ids]
-    try:
-        cls = get_class(target)
-    except Exception as exc:
-        raise ConfigError(f"backend._target_: cannot import '{target}': {exc}") from exc
+    cls = backend_class(cfg)
     if "run_dir" in params and params["run_dir"] is None:
         params["run_dir"] = str(run_dir)   # where a backend keeps its own logs (ULogs, vehicle output)
     return cls(homes_ned_m=homes, tick_s=tick_s, rng=rng_for(seed, "backend"),

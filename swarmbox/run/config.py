@@ -102,7 +102,8 @@ class RunConfig:
     task_retry_ticks: int = 8       # reliable TaskCommand re-send period
     task_max_retries: int = 40
     arm_retry_ticks: int = 20
-    proximity_m: float = 2.0        # ProxAlert radius
+    proximity_m: float = 2.0        # ProxAlert radius (m)
+    proximity_window_s: float = 0.0  # s; > 0: also alert pairs that will come that close within it
     min_alive: int = 1              # fewer alive drones after ICEBREAK: abort
     state_every_ticks: int = 1      # state-table sampling period
     # node name -> {offset_s, drift_ppm}: local = true * (1 + drift_ppm * 1e-6) + offset_s, e.g.
@@ -110,7 +111,11 @@ class RunConfig:
     clocks: Optional[Any] = None
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     speed: float = 1.0              # real-time backends: wall-clock pacing factor (SITL speed-up)
-    progress: bool = True           # progress lines on stderr for long runs
+    progress: bool = True           # progress lines on stderr for long runs (off while the monitor shows)
+    monitor: str = "auto"           # live dashboard: auto (real-time backends, on a terminal) | on | off
+    monitor_hz: float = 4.0         # Hz, dashboard refresh rate
+    # stream live to Rerun: a viewer's URL (rerun+http://127.0.0.1:9876/proxy) or an .rrd path
+    rerun: Optional[str] = None
     out_dir: Optional[str] = None   # default: Hydra's output directory
     # wall s one hook call may take before the run fails naming it; null: off. Always off when the
     # vehicles were not started by the run (px4 backend connecting to running vehicles: hardware).

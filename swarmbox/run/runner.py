@@ -27,6 +27,7 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from swarmbox import __version__
+from swarmbox import monitor as live_monitor
 from swarmbox.core.messages import GROUND_ID
 from swarmbox.core.swarm import Swarm, gc_paused
 from swarmbox.faults import FaultConfigError, describe
@@ -143,24 +144,28 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         "started_at": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     recorder = Recorder(run_dir)
-    swarm = progress = None
+    swarm = progress = monitor = None
     dog = None
     discard = False
     started = time.perf_counter()
     try:
         with interrupt.armed():
             try:
-                swarm = build.build_swarm(cfg, m, recorder)
+                monitor = _monitor(cfg, f"SwarmBox {choices.get('algo', '?')}/{m.name} seed={cfg.seed}")
+                swarm = build.build_swarm(cfg, m, monitor.tap(recorder) if monitor else recorder)
             except checks.INPUT_ERRORS:   # found only while building (a fault the backend cannot express)
                 discard = True
                 _discard(run_dir, existed, logs_existed)
                 raise
             if prepare is not None:
                 prepare(swarm)
+            if monitor:
+                monitor.start(swarm)
             dog = _watchdog(cfg, swarm)
             tally = SafetyTally(swarm.backend)
             label = f"{choices.get('algo', '?')} seed={cfg.seed}"
-            progress = RunProgress(label, m.max_sim_time_s) if cfg.run.progress else None
+            show_progress = cfg.run.progress and not (monitor and monitor.dashboard)   # the dashboard says it
+            progress = RunProgress(label, m.max_sim_time_s) if show_progress else None
 
             def tick_hook(s: Swarm) -> None:
                 recorder.maybe_flush()
@@ -192,6 +197,11 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
             dog.stop()
         if progress is not None:
             progress.close()
+        if monitor is not None:
+            try:
+                manifest["monitor"] = monitor.stop(swarm)
+            except Exception as exc:  # noqa: BLE001 - watching must never cost the run its logs
+                manifest["monitor"] = {"error": f"{type(exc).__name__}: {exc}"}
         if manifest["status"] in ("failed", "interrupted"):
             _reached(manifest, swarm, started)
         if not discard:
@@ -226,6 +236,22 @@ def _close(manifest: dict[str, Any], swarm: Swarm | None, recorder: Recorder, ru
         except OSError as exc:
             manifest.update(status="failed", reason=f"{manifest['reason']}; {exc}".strip("; "))
         write_atomic(run_dir / "run.json", json.dumps(manifest, indent=2, sort_keys=True))
+
+
+def _monitor(cfg: DictConfig, title: str):
+    """The live dashboard of this run, or None (see :mod:`swarmbox.monitor`)."""
+    realtime = bool(getattr(build.backend_class(cfg), "realtime", False))
+    dashboard = live_monitor.wanted(cfg.run.monitor, realtime=realtime, multirun=_in_sweep())
+    if not dashboard and not cfg.run.rerun:
+        return None
+    return live_monitor.create(title, cfg.run.monitor_hz, dashboard=dashboard, rerun=cfg.run.rerun)
+
+
+def _in_sweep() -> bool:
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+
+    return HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
 
 
 def summary_line(manifest: dict[str, Any], run_dir: Path) -> str:

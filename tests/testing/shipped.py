@@ -42,6 +42,7 @@ DELIVERY = (["mission=delivery", "mission.generator.count=4", "mission.generator
              "algo.params.cruise_altitude_m=4", "algo.params.altitude_step_m=1"], None)
 SMALL: dict[str, tuple[list[str], Callable[[DictConfig], None] | None]] = {
     "hover": (["mission=hover", "algo.params.hover_s=1"], None),
+    "crossing": (["mission=crossing", "algo.params.speed_m_s=6", "algo.params.depart_s=2"], None),
     "formation": (["mission=formation", "algo.params.start_s=2", "algo.params.radius_m=3",
                    "algo.params.angular_rate_rad_s=0.6", "algo.params.complete_after_s=15"], None),
     "formation9": (["mission=formation", "algo.params.start_s=2", "algo.params.radius_m=3",

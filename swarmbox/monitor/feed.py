@@ -1,0 +1,143 @@
+"""What the live monitor reads, taken on the tick thread and handed over whole.
+
+The ground node calls :meth:`GroundFeed.after_tick` at the end of every tick. Almost always that is
+one clock read and a comparison; a few times a second it copies what the ground already holds —
+stage, the latest Report of every inferior (immutable, shared, not copied), its Report counters,
+the alerted proximity pairs — into an immutable :class:`Snapshot` and swaps it in. The render thread
+only ever reads the latest snapshot and the event queue, so it never touches live node state and the
+tick loop never waits for it.
+
+Events reach the monitor through :class:`TappedRecorder`: the event rows the nodes of this process
+log anyway (the ground's own, and the drones' when they run here) are also put on a queue.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from swarmbox.core.messages import GROUND_ID, DescendantState, Report
+
+#: Event kinds worth a line on the dashboard (``progress`` and ``command`` are too chatty).
+SHOWN_KINDS = frozenset({"marker", "safety", "collision", "fault", "topology", "failsafe", "error",
+                         "proximity", "link", "estimator"})
+
+
+@dataclass(frozen=True, slots=True)
+class DroneRow:
+    """One direct inferior as the ground knows it."""
+
+    drone_id: int
+    alive: bool
+    silent_ticks: int
+    received: int           # Reports received so far
+    report: Report          # the latest one
+
+
+@dataclass(frozen=True, slots=True)
+class Snapshot:
+    wall_s: float           # perf_counter at the snapshot
+    t_s: float              # ground clock
+    tick: int
+    tick_s: float
+    stage: str
+    stage_time_s: float
+    reason: str
+    swarm_size: int
+    drones: tuple[DroneRow, ...]
+    forwarded: tuple[DescendantState, ...]   # drones seen only through their superior's Report
+    prox: tuple[tuple[tuple[int, int], float], ...]
+    alive: int
+
+
+class GroundFeed:
+    """The ground observer: snapshots at ``rate_hz`` (wall clock) and an event queue."""
+
+    def __init__(self, rate_hz: float = 4.0, max_events: int = 2000) -> None:
+        self.period_s = 1.0 / rate_hz
+        self.latest: Snapshot | None = None
+        self.events: deque[tuple[int, tuple]] = deque(maxlen=max_events)
+        self.snapshot_cost_s = 0.0     # tick-thread time spent taking snapshots
+        self.snapshots = 0
+        self._next = 0.0
+
+    def after_tick(self, ground: Any) -> None:
+        now = time.perf_counter()
+        if now < self._next:
+            return
+        self._next = now + self.period_s
+        self.latest = snapshot(ground, now)
+        self.snapshots += 1
+        self.snapshot_cost_s += time.perf_counter() - now
+
+    def event_sink(self, node_id: int) -> Callable[[tuple], None]:
+        push = self.events.append
+
+        def sink(row: tuple) -> None:
+            if row[2] in SHOWN_KINDS and row[3] != "stats":   # link/stats: periodic counters
+                push((node_id, row))
+        return sink
+
+    def stage_sink(self, node_id: int) -> Callable[[tuple], None]:
+        push = self.events.append
+
+        def sink(row: tuple) -> None:   # (t_s, tick, stage, name, reason)
+            push((node_id, (row[0], row[1], "stage", row[3], node_id, row[4])))
+        return sink
+
+
+def snapshot(ground: Any, wall_s: float, ticks_ago: int = 0) -> Snapshot:
+    """The ground's state; ``ticks_ago`` = 1 when taken after the loop has already advanced time."""
+    rows, direct = [], set()
+    for drone_id, inf in list(ground.inferiors.items()):
+        rows.append(DroneRow(drone_id, inf.alive, inf.silent_ticks, inf.received, inf.report))
+        direct.add(drone_id)
+    forwarded = tuple(d for r in rows if r.alive for d in r.report.descendants if d.drone_id not in direct)
+    _, alive = ground.head_count()
+    return Snapshot(wall_s, ground.clock.now() - ticks_ago * ground.tick_s, ground.time.tick - ticks_ago,
+                    ground.tick_s, ground.stage.name,
+                    ground.stage_tick * ground.tick_s, ground.reason, ground.mission.swarm_size,
+                    tuple(rows), forwarded, tuple(ground.prox_pairs.items()), alive)
+
+
+class _TappedLog:
+    """A node's log whose ``events`` rows (and the ground's ``stages``) also go to the monitor."""
+
+    def __init__(self, log: Any, sinks: dict[str, Callable[[tuple], None]]) -> None:
+        self._log, self._sinks = log, sinks
+
+    def appender(self, table: str) -> Callable[[tuple], None]:
+        append = self._log.appender(table)
+        sink = self._sinks.get(table)
+        if sink is None:
+            return append
+
+        def both(row: tuple) -> None:
+            append(row)
+            sink(row)
+        return both
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._log, name)
+
+
+class TappedRecorder:
+    """Wraps the run's recorder so every node's event rows are also queued for the monitor."""
+
+    def __init__(self, recorder: Any, feed: GroundFeed) -> None:
+        self._recorder, self._feed = recorder, feed
+        self._logs: dict[int, _TappedLog] = {}
+
+    def node(self, node_id: int) -> _TappedLog:
+        if node_id not in self._logs:
+            sinks = {"events": self._feed.event_sink(node_id)}
+            if node_id == GROUND_ID:
+                sinks["stages"] = self._feed.stage_sink(node_id)
+            self._logs[node_id] = _TappedLog(self._recorder.node(node_id), sinks)
+        return self._logs[node_id]
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._recorder, name)

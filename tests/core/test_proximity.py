@@ -1,0 +1,90 @@
+"""Proximity alerts: the ground alerts exactly the pairs that came closer than the limit, with start
+and end times, tells both drones, and can look ahead by a time window."""
+
+from __future__ import annotations
+
+import itertools
+import json
+
+import numpy as np
+import pytest
+
+from swarmbox.core.messages import DescendantState
+from swarmbox.core.proximity import ProximityTracker
+from tests.conftest import table
+
+CROSSING = ("algo=crossing", "mission=crossing", "run.proximity_m=10")
+TICK_S = 0.025
+
+
+def _episodes(run_dir):
+    ev = table(run_dir, "ground", "events")
+    ends = ev[(ev["kind"] == "proximity") & (ev["name"] == "prox_end")]
+    return {tuple(json.loads(d)["pair"]): (json.loads(d), t) for d, t in zip(ends["data"], ends["t_s"],
+                                                                            strict=True)}
+
+
+def _close_ticks(run_dir, limit_m):
+    """Per pair, the ticks at which the drones' own position estimates were closer than ``limit_m``."""
+    pos = {i: table(run_dir, f"drone_{i}", "state").set_index("tick")[["pos_n", "pos_e", "pos_d"]]
+           for i in range(4)}
+    out = {}
+    for a, b in itertools.combinations(range(4), 2):
+        j = pos[a].add_suffix("_a").join(pos[b].add_suffix("_b"), how="inner")
+        dist = np.linalg.norm(j.iloc[:, :3].to_numpy() - j.iloc[:, 3:].to_numpy(), axis=1)
+        ticks = j.index[dist < limit_m]
+        if len(ticks):
+            out[(a, b)] = (int(ticks.min()), int(ticks.max()), float(dist.min()))
+    return out
+
+
+def test_alerts_exactly_the_pairs_that_came_within_10_m_with_start_and_end(run):
+    manifest, d = run(*CROSSING)
+    assert manifest["status"] == "ok", manifest["reason"]
+    episodes, truth = _episodes(d), _close_ticks(d, 10.0)
+    assert set(truth) == {(0, 1), (0, 2)}           # the mission's geometry, checked on the logs
+    assert set(episodes) == set(truth)
+    for pair, (first, last, min_d) in truth.items():
+        ep, end_t = episodes[pair]
+        # the ground sees a position one tick after the drone had it (the Report's trip)
+        assert first * TICK_S < ep["start_t_s"] <= (first + 2) * TICK_S + 1e-9, pair
+        assert (last + 1) * TICK_S < end_t <= (last + 3) * TICK_S + 1e-9, pair
+        assert ep["breached"] and not ep["predicted"]
+        assert ep["min_distance_m"] == pytest.approx(min_d, abs=0.15)
+    # both drones of each pair were told, through the algorithm hook
+    for i, others in {0: {1, 2}, 1: {0}, 2: {0}, 3: set()}.items():
+        ev = table(d, f"drone_{i}", "events")
+        warned = {json.loads(x)["other"] for x in ev.loc[ev["name"] == "near_miss_warning", "data"]}
+        assert warned == others, i
+    sent = table(d, "ground", "messages")
+    prox = sent[(sent["kind"] == "send") & (sent["type"] == "prox")]
+    assert set(prox["dst"]) == {0, 1, 2}
+
+
+def test_the_time_window_warns_before_the_pair_is_close(run):
+    manifest, d = run(*CROSSING, "run.proximity_window_s=3")
+    assert manifest["status"] == "ok", manifest["reason"]
+    episodes = _episodes(d)
+    assert set(episodes) == {(0, 1), (0, 2)}        # parallel and distant pairs are not predicted
+    for ep, _ in episodes.values():
+        assert ep["predicted"] and ep["breached"]
+        assert 1.0 < ep["breach_t_s"] - ep["start_t_s"] <= 3.0 + 4 * TICK_S   # noisy velocity
+
+
+def _view(*points):
+    return tuple(DescendantState(i, 3, p) for i, p in enumerate(points))
+
+
+def test_tracker_episodes_and_prediction():
+    tr = ProximityTracker(5.0, window_s=2.0)
+    pairs, started, _ = tr.update(0.0, _view((0, 0, 0), (20, 0, 0), (0, 30, 0)))
+    assert pairs == {} and started == []
+    # 0 and 1 close at 8 m/s: 12 m apart, closest approach within 1.5 s -> predicted
+    pairs, started, _ = tr.update(0.5, _view((2, 0, 0), (18, 0, 0), (0, 30, 0)))
+    assert list(pairs) == [(0, 1)] and started[0].predicted and not started[0].breached
+    pairs, _, _ = tr.update(1.0, _view((6, 0, 0), (10, 0, 0), (0, 30, 0)))
+    assert pairs[(0, 1)] == pytest.approx(4.0) and tr.active[(0, 1)].breach_t_s == 1.0
+    _, _, ended = tr.update(3.0, _view((6, 0, 0), (30, 0, 0), (0, 30, 0)))
+    assert [e.pair for e in ended] == [(0, 1)] and ended[0].min_distance_m == pytest.approx(4.0)
+    with pytest.raises(ValueError, match="run.proximity_m"):
+        ProximityTracker(0.0)

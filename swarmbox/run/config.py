@@ -91,6 +91,19 @@ class SafetyConfig:
 
 
 @dataclass
+class NetConfig:
+    """The real network of ``runtime=processes`` (docs/distributed.md)."""
+
+    key: Optional[str] = None       # the mission's HMAC key; null: from the env var below, else random
+    key_env: str = "SWARMBOX_NET_KEY"   # environment variable holding the key
+    max_age_s: float = 2.0          # s, wall-clock bound between a frame's sender and its receiver
+    replay_window: int = 1024       # counters remembered per sender (replay protection)
+    ready_timeout_s: float = 120.0  # wall s for every node process to be built and connected
+    stop_timeout_s: float = 30.0    # wall s for agents to finish after the ground, then SIGTERM
+    start_delay_s: float = 1.0      # wall s between "all ready" and tick 0
+
+
+@dataclass
 class RunConfig:
     tick_hz: float = 40.0
     timeouts_s: StageTimeouts = field(default_factory=StageTimeouts)
@@ -109,6 +122,8 @@ class RunConfig:
     speed: float = 1.0              # real-time backends: wall-clock pacing factor (SITL speed-up)
     progress: bool = True           # progress lines on stderr for long runs
     out_dir: Optional[str] = None   # default: Hydra's output directory
+    runtime: str = "single"         # single: one process | processes: ground + one process per agent
+    net: NetConfig = field(default_factory=NetConfig)
 
 
 @dataclass

@@ -95,6 +95,13 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
     ``prepare(swarm)`` is called once the swarm is built, before the first tick (programmatic use:
     schedule events with ``swarm.schedule``).
     """
+    if cfg.run.runtime == "processes":
+        if prepare is not None:
+            raise ValueError("prepare() needs the single-process runtime (run.runtime=single)")
+        from swarmbox.run import processes
+        return processes.execute(cfg, run_dir, choices, overrides)
+    if cfg.run.runtime != "single":
+        raise ValueError(f"run.runtime must be 'single' or 'processes', got '{cfg.run.runtime}'")
     run_dir.mkdir(parents=True, exist_ok=True)
     if (run_dir / "run.json").exists():
         raise RunExistsError(f"{run_dir} already holds a finished run; refusing to overwrite it")

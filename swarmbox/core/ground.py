@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from swarmbox.api import GroundAlgorithm, GroundContext
 from swarmbox.core.messages import GROUND_ID, DescendantState, Heartbeat, ProxAlert, Report, TaskAck
@@ -118,6 +117,8 @@ def _close_pairs(view: tuple[DescendantState, ...], limit_m: float) -> list[tupl
     if len(view) <= 24:
         return [(a, b) for a in range(len(view)) for b in range(a + 1, len(view))
                 if math.dist(view[a].pos_ned_m, view[b].pos_ned_m) < limit_m]
+    from scipy.spatial import cKDTree  # here, not at the top: an agent process must not load scipy
+
     pts = np.array([d.pos_ned_m for d in view])
     pairs = cKDTree(pts).query_pairs(limit_m, output_type="ndarray")
     return sorted(map(tuple, pairs.tolist()))

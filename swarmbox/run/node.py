@@ -30,7 +30,6 @@ from omegaconf import DictConfig, OmegaConf
 from swarmbox.api import DroneAlgorithm, GroundAlgorithm
 from swarmbox.core.agent import AgentNode
 from swarmbox.core.clock import ClockSpec, NodeClock, TimeSource
-from swarmbox.core.ground import GroundNode
 from swarmbox.core.messages import GROUND_ID
 from swarmbox.core.stages import Stage
 from swarmbox.net.auth import KEY_ENV, AuthSpec
@@ -96,7 +95,8 @@ class NodeProcess:
         self.time = TimeSource()
         self.clock = NodeClock(self.time, clock_spec)
         n = cfg.network
-        links = {(lk.src, lk.dst): LinkSpec(lk.latency_ms / 1e3, lk.jitter_ms / 1e3, lk.loss_prob) for lk in n.links}
+        links = {(lk.src, lk.dst): LinkSpec(lk.latency_ms / 1e3, lk.jitter_ms / 1e3, lk.loss_prob)
+                 for lk in n.links}
         auth = AuthSpec(mission_key(cfg), plan["mission_id"], float(cfg.run.net.max_age_s),
                         int(cfg.run.net.replay_window))
         self.medium = ZenohMedium(
@@ -115,12 +115,14 @@ class NodeProcess:
                       rng=build.rng_for(seed, f"algo/{self.name}"))
         self.backend = None
         if node_id == GROUND_ID:
+            from swarmbox.core.ground import GroundNode  # (scipy: the ground only, agents stay small)
             self.node = GroundNode(build._algorithm(cfg.algo.ground, GroundAlgorithm, "ground"), **common)
         else:
             self.backend = build.backend_of(cfg, m, self.timing.tick_s, seed, run_dir / "nodes" / self.name,
                                             drone_ids=[node_id])
+            algorithm = build._algorithm(cfg.algo.drone, DroneAlgorithm, "drone")
             self.node = AgentNode(node_id, superior=topo.superiors[node_id], vehicle=self.backend.vehicles[0],
-                                  algorithm=build._algorithm(cfg.algo.drone, DroneAlgorithm, "drone"), **common)
+                                  algorithm=algorithm, **common)
             if cfg.topology.peers == "all":
                 for other in m.drone_ids:
                     if other != node_id:
@@ -195,7 +197,8 @@ class NodeProcess:
         finally:
             self.medium.close()
             self.recorder.close()
-            write_atomic(self.run_dir / "nodes" / f"{self.name}.json", json.dumps(result, indent=2, sort_keys=True))
+            write_atomic(self.run_dir / "nodes" / f"{self.name}.json",
+                         json.dumps(result, indent=2, sort_keys=True))
 
 
 def main(argv: list[str] | None = None) -> int:

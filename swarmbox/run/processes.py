@@ -71,8 +71,8 @@ class NodeSet:
     def start(self, key: str) -> None:
         self.nodes_dir.mkdir(parents=True, exist_ok=True)
         ports = free_ports(len(self.ids))
-        plan = {"mission_id": secrets.token_hex(6),
-                "locators": {node_name(i): f"tcp/127.0.0.1:{p}" for i, p in zip(self.ids, ports, strict=True)}}
+        locators = {node_name(i): f"tcp/127.0.0.1:{p}" for i, p in zip(self.ids, ports, strict=True)}
+        plan = {"mission_id": secrets.token_hex(6), "locators": locators}
         (self.nodes_dir / "plan.json").write_text(json.dumps(plan, indent=2))
         env = dict(os.environ)
         env[self.cfg.run.net.key_env] = key
@@ -84,7 +84,8 @@ class NodeSet:
                     [sys.executable, "-m", "swarmbox.run.node", *role, "--run-dir", str(self.run_dir)],
                     stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT, env=env,
                     start_new_session=True)
-        (self.nodes_dir / "pids.json").write_text(json.dumps({node_name(i): p.pid for i, p in self.procs.items()}))
+        pids = {node_name(i): p.pid for i, p in self.procs.items()}
+        (self.nodes_dir / "pids.json").write_text(json.dumps(pids))
 
     def wait_ready(self, timeout_s: float) -> None:
         deadline = wall.monotonic() + timeout_s
@@ -94,10 +95,12 @@ class NodeSet:
                 if (self.nodes_dir / f"{node_name(i)}.ready").exists():
                     waiting.discard(i)
                 elif self.procs[i].poll() is not None:
-                    raise LaunchError(f"{node_name(i)} exited with code {self.procs[i].returncode} before it was "
-                                      f"ready:\n{_tail(self.nodes_dir / f'{node_name(i)}.log')}")
+                    log = _tail(self.nodes_dir / f"{node_name(i)}.log")
+                    raise LaunchError(f"{node_name(i)} exited with code {self.procs[i].returncode} "
+                                      f"before it was ready:\n{log}")
             if wall.monotonic() > deadline:
-                raise LaunchError(f"nodes not ready after {timeout_s:g} s: {[node_name(i) for i in sorted(waiting)]}")
+                late = [node_name(i) for i in sorted(waiting)]
+                raise LaunchError(f"nodes not ready after {timeout_s:g} s: {late}")
             wall.sleep(POLL_S)
 
     def go(self, delay_s: float) -> float:

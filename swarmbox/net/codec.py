@@ -1,6 +1,6 @@
 """A compact binary encoding of the swarm messages (what a real link carries).
 
-Little-endian, no padding, no field names: a 21-byte header (type u8, msg_id u64, t_sent_s f64,
+Little-endian, no padding, stages as signed bytes (ABORT is -1), no field names: a 21-byte header (type u8, msg_id u64, t_sent_s f64,
 src i16, dst i16) and a fixed body per type, vectors as three float32. An absent vector or yaw is
 NaN; variable parts (successors, descendants, neighbours) carry a count or fill the frame's tail.
 The encoded length equals the message's ``nbytes`` for ASCII payload strings, so the sizes the logs
@@ -24,12 +24,12 @@ from swarmbox.core.messages import (
 
 _HEADER = struct.Struct("<BQdhh")
 _VEC = struct.Struct("<3f")
-_HB = struct.Struct("<BB")
-_REPORT = struct.Struct("<B?HH9fH")
+_HB = struct.Struct("<bB")
+_REPORT = struct.Struct("<b?HH9fH")
 _TASK = struct.Struct("<I?B4fH")
 _ACK = struct.Struct("<I")
 _COUNT = struct.Struct("<H")
-_DESC = struct.Struct("<hB3f")
+_DESC = struct.Struct("<hb3f")
 _NAN3 = (math.nan, math.nan, math.nan)
 
 _TYPE_CODE = {Heartbeat: 1, Report: 2, TaskCommand: 3, TaskAck: 4, ProxAlert: 5}

@@ -114,6 +114,9 @@ class NodeProcess:
                       params=OmegaConf.to_container(cfg.algo.params, resolve=True),
                       rng=build.rng_for(seed, f"algo/{self.name}"))
         self.backend = None
+        vehicle = plan.get("vehicles", {}).get(self.name)
+        if vehicle:   # an autopilot the launcher started: connect to it like to a real vehicle
+            cfg.backend.update(px4_build=None, wait_ready=True, **vehicle)
         if node_id == GROUND_ID:
             from swarmbox.core.ground import GroundNode  # (scipy: the ground only, agents stay small)
             self.node = GroundNode(build._algorithm(cfg.algo.ground, GroundAlgorithm, "ground"), **common)

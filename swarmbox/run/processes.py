@@ -59,6 +59,30 @@ def _tail(path: Path) -> str:
         return ""
 
 
+def autopilots(cfg: DictConfig, m: Any, run_dir: Path) -> tuple[Any, dict[str, dict[str, Any]]]:
+    """PX4 SITL instances for ``backend=px4`` with a ``px4_build``, started here, not by the agents.
+
+    They stand for the drones' autopilots, which exist before and apart from the companion computers:
+    each agent process then connects to its own instance (``plan.json`` ``vehicles``) like to a real
+    vehicle. Returns the launcher (None otherwise) and each agent's connection settings.
+    """
+    b = cfg.backend
+    if b.get("name") != "px4" or not b.get("px4_build"):
+        return None, {}
+    from swarmbox.hal.mavlink.frames import GeoFrame
+    from swarmbox.hal.px4.backend import Px4Params
+    from swarmbox.hal.px4.sitl import SitlLauncher, connection_of
+
+    params = OmegaConf.to_container(b, resolve=True)
+    params = {k: v for k, v in params.items() if k not in ("_target_", "name")}
+    p = Px4Params.from_kwargs(params)
+    homes = [tuple(float(x) for x in m.initial_positions[i]) for i in m.drone_ids]
+    sitl = SitlLauncher(p, homes, GeoFrame(p.origin_lat_deg, p.origin_lon_deg, p.origin_alt_m), run_dir)
+    sitl.start([0] * len(homes))
+    return sitl, {node_name(i): {"connections": [connection_of(k)], "system_ids": [k + 1]}
+                  for k, i in enumerate(m.drone_ids)}
+
+
 class NodeSet:
     """The node processes of one run."""
 
@@ -68,11 +92,11 @@ class NodeSet:
         self.ids = [GROUND_ID, *drone_ids]
         self.procs: dict[int, subprocess.Popen[bytes]] = {}
 
-    def start(self, key: str) -> None:
+    def start(self, key: str, vehicles: dict[str, dict[str, Any]]) -> None:
         self.nodes_dir.mkdir(parents=True, exist_ok=True)
         ports = free_ports(len(self.ids))
         locators = {node_name(i): f"tcp/127.0.0.1:{p}" for i, p in zip(self.ids, ports, strict=True)}
-        plan = {"mission_id": secrets.token_hex(6), "locators": locators}
+        plan = {"mission_id": secrets.token_hex(6), "locators": locators, "vehicles": vehicles}
         (self.nodes_dir / "plan.json").write_text(json.dumps(plan, indent=2))
         env = dict(os.environ)
         env[self.cfg.run.net.key_env] = key
@@ -187,8 +211,10 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
     manifest.update(n_drones=m.swarm_size, nodes=[node_name(i) for i in [GROUND_ID, *m.drone_ids]])
     nodes = NodeSet(cfg, run_dir, list(m.drone_ids))
     start = wall.time()
+    sitl = None
     try:
-        nodes.start(key)
+        sitl, vehicles = autopilots(cfg, m, run_dir)
+        nodes.start(key, vehicles)
         nodes.wait_ready(float(cfg.run.net.ready_timeout_s))
         start = nodes.go(float(cfg.run.net.start_delay_s))
         nodes.wait_ground()
@@ -206,6 +232,8 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         manifest.update(status="failed", reason=f"{type(exc).__name__}: {exc}", node_results=nodes.results())
     finally:
         nodes.stop()
+        if sitl is not None:
+            sitl.stop()
         elapsed = max(wall.time() - start, 1e-9)
         manifest.update(wall_time_s=elapsed, real_time_factor=manifest["sim_time_s"] / elapsed)
         write_atomic(run_dir / "run.json", json.dumps(manifest, indent=2, sort_keys=True))

@@ -17,6 +17,8 @@ MESSAGES = [
     Report(13, 2.5, 3, -1, 3, False, 1, 1, (1.0, 2.0, -3.0), (0.0, 0.5, 0.0), (0.25, 0.0, 0.0), "", ()),
     TaskCommand(14, 3.0, -1, 2, 9, True, 7, (10.0, -4.0, -5.0), 1.5, "go"),
     TaskCommand(15, 3.0, -1, 2, 10, False, 0, None, None, ""),
+    Report(18, 9.0, 2, 0, -1, False, 1, 0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), None, "", D[:1]),   # ABORT
+    Heartbeat(19, 9.5, 0, -1, (), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)),
     TaskAck(16, 3.5, 2, -1, 9),
     ProxAlert(17, 4.0, -1, 3, D),
 ]
@@ -36,7 +38,7 @@ def test_float32_positions_survive_within_float32_precision():
     assert all(math.isclose(a, b, rel_tol=1e-6) for a, b in zip(back.pos_ned_m, hb.pos_ned_m, strict=True))
 
 
-@pytest.mark.parametrize("frame", [b"", b"\x09" + bytes(40), encode(MESSAGES[0])[:-3], encode(MESSAGES[5]) + b"x"])
+@pytest.mark.parametrize("frame", [b"", b"\x09" + bytes(40), encode(MESSAGES[0])[:-3], encode(MESSAGES[7]) + b"x"])
 def test_malformed_frames_raise(frame):
     with pytest.raises(DecodeError):
         decode(frame)
@@ -67,7 +69,7 @@ def _reason(verifier: Verifier, frame: bytes) -> str:
 
 def test_signed_frame_opens_once_then_is_a_replay():
     signer, verifier, _ = _pair()
-    payload = encode(MESSAGES[5])
+    payload = encode(MESSAGES[7])
     frame = signer.sign(payload)
     assert verifier.open(frame) == (3, payload)
     assert _reason(verifier, frame) == "replayed"

@@ -78,7 +78,7 @@ def intrude(plan: dict, stop: threading.Event) -> None:
     to_ground = session.declare_publisher(f"{prefix}/to/-1")
     ground_hb = session.declare_publisher(f"{prefix}/hb/-1")
     fake_report = Report(1, 0.0, 0, -1, 5, True, 1, 1, (0.0,) * 3, (0.0,) * 3, None, "", ())
-    fake_abort = Heartbeat(2, 0.0, -1, 6, (), (0.0,) * 3, (0.0,) * 3)          # stage 6 = ABORT
+    fake_abort = Heartbeat(2, 0.0, -1, -1, (), (0.0,) * 3, (0.0,) * 3)         # stage -1 = ABORT
     try:
         while not stop.wait(0.5):
             head = b"SB\x01" + mission_tag(plan["mission_id"]) + struct.pack("<hQd", -1, 2**62, time.time())

@@ -1,10 +1,10 @@
 """A compact binary encoding of the swarm messages (what a real link carries).
 
-Little-endian, no padding, stages as signed bytes (ABORT is -1), no field names: a 21-byte header (type u8, msg_id u64, t_sent_s f64,
-src i16, dst i16) and a fixed body per type, vectors as three float32. An absent vector or yaw is
-NaN; variable parts (successors, descendants, neighbours) carry a count or fill the frame's tail.
-The encoded length equals the message's ``nbytes`` for ASCII payload strings, so the sizes the logs
-record are the sizes on the wire.
+Little-endian, no padding, no field names: a 21-byte header (type u8, msg_id u64, t_sent_s f64,
+src i16, dst i16) and a fixed body per type, vectors as three float32, stages as signed bytes. An
+absent vector or yaw is NaN; variable parts (successors, descendants, neighbours) carry a count
+or fill the frame's tail. The encoded length equals the message's ``nbytes`` for ASCII payload
+strings, so the sizes the logs record are the sizes on the wire.
 """
 
 from __future__ import annotations

@@ -38,7 +38,10 @@ def test_float32_positions_survive_within_float32_precision():
     assert all(math.isclose(a, b, rel_tol=1e-6) for a, b in zip(back.pos_ned_m, hb.pos_ned_m, strict=True))
 
 
-@pytest.mark.parametrize("frame", [b"", b"\x09" + bytes(40), encode(MESSAGES[0])[:-3], encode(MESSAGES[7]) + b"x"])
+BAD_FRAMES = [b"", b"\x09" + bytes(40), encode(MESSAGES[0])[:-3], encode(MESSAGES[7]) + b"x"]
+
+
+@pytest.mark.parametrize("frame", BAD_FRAMES)
 def test_malformed_frames_raise(frame):
     with pytest.raises(DecodeError):
         decode(frame)
@@ -113,3 +116,14 @@ def test_key_is_never_shown_and_must_be_long_enough():
     assert "0123" not in repr(AuthSpec(KEY, "m1"))
     with pytest.raises(ValueError, match="16 bytes"):
         AuthSpec(b"short", "m1")
+
+
+def test_both_transports_implement_the_medium_interface():
+    from swarmbox.net.medium import SimMedium
+    from swarmbox.net.transport import Medium
+    from swarmbox.net.zenoh_medium import ZenohMedium
+
+    methods = [n for n in vars(Medium) if not n.startswith("_") and callable(getattr(Medium, n))]
+    assert "deliver_due" in methods and "register" in methods
+    for cls in (SimMedium, ZenohMedium):
+        assert [n for n in methods if not callable(getattr(cls, n, None))] == [], cls.__name__

@@ -161,3 +161,22 @@ def test_killed_ground_leaves_agents_failing_safe(tmp_path):
         assert (ev["name"] == "superior_lost").any()
         state = pd.read_parquet(run_dir / "logs" / f"drone_{i}" / "state.parquet")
         assert state["armed"].iloc[-1] == False  # noqa: E712  (landed and disarmed)
+
+
+PX4_BUILD = os.environ.get("SWARMBOX_PX4_BUILD")
+
+
+@pytest.mark.skipif(not PX4_BUILD, reason="no PX4 SITL build configured: set SWARMBOX_PX4_BUILD")
+def test_formation_over_processes_on_px4_sitl(tmp_path):
+    run_dir = tmp_path / "run"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.run([sys.executable, "-m", "swarmbox.run", "run.runtime=processes", "backend=px4",
+                           f"backend.px4_build={PX4_BUILD}", f"run.out_dir={run_dir}", "run.progress=false"],
+                          capture_output=True, text=True, env=env, timeout=900)
+    manifest = json.loads((run_dir / "run.json").read_text())
+    assert manifest["status"] == "ok", proc.stdout[-2000:] + manifest["reason"]
+    plan = json.loads((run_dir / "nodes" / "plan.json").read_text())
+    assert plan["vehicles"]["drone_2"] == {"connections": ["udpin:127.0.0.1:14542"], "system_ids": [3]}
+    for i in range(4):
+        assert manifest["node_results"][f"drone_{i}"]["status"] == "ok"
+        assert (run_dir / "px4" / f"instance_{i}" / "out.log").exists()

@@ -31,7 +31,8 @@ def overrides_for(n: int) -> list[str]:
     if side * side != n:
         raise SystemExit(f"--sizes: {n} is neither 4, 9 nor a square (a hover grid is used)")
     grid = ",".join(f"{i}:[{5.0 * (i // side)},{5.0 * (i % side)}]" for i in range(n))
-    return ["algo=hover", "mission=hover", f"mission.swarm_size={n}", f"mission.initial_positions={{{grid}}}"]
+    return ["algo=hover", "mission=hover", f"mission.swarm_size={n}", "mission.initial_positions=null",
+            f"mission.initial_positions={{{grid}}}"]
 
 
 def measure(n: int, out: Path) -> dict:

@@ -37,7 +37,7 @@ from swarmbox.net.medium import LinkSpec
 from swarmbox.net.zenoh_medium import ZenohMedium
 from swarmbox.record.schema import node_name
 from swarmbox.record.writer import Recorder
-from swarmbox.run import build, mission
+from swarmbox.run import build, mission, node_faults
 from swarmbox.run.runner import write_atomic
 
 
@@ -131,6 +131,9 @@ class NodeProcess:
                     if other != node_id:
                         self.medium.subscribe(node_id, other)
             self._events = log.appender("events")
+        self.faults = node_faults.LocalSwarm(self.node, node_id, list(m.drone_ids), self.medium, self.time,
+                                             self.timing.tick_s)
+        node_faults.install(cfg, self.faults, m, self.backend, lambda stream: build.rng_for(seed, stream))
 
     def true_time(self, wall_s: float) -> float:
         """Mission time of a wall-clock instant (the clock every node reads, before its own error)."""
@@ -163,6 +166,7 @@ class NodeProcess:
             if ahead > 0:
                 wall.sleep(ahead)
             t.t_s = self.true_time(wall.time())
+            self.faults.run_due()
             self.medium.deliver_due()
             node.tick()
             if self.backend is not None:

@@ -28,7 +28,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from swarmbox.core.messages import GROUND_ID
 from swarmbox.record.schema import SCHEMA_VERSION, node_name
-from swarmbox.run import build, mission
+from swarmbox.run import build, mission, node_faults
 
 _PACKAGE_ROOT = Path(__file__).resolve().parents[2]
 POLL_S = 0.2
@@ -207,12 +207,13 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         "n_drones": 0, "nodes": [], "clocks": build.clock_settings(cfg), "node_results": {},
         "versions": _versions(), "git_sha": _git_sha(),
         "started_at": datetime.now(UTC).isoformat(timespec="seconds")}
-    m = mission.load(cfg, build.rng_for(int(cfg.seed), "dataset"))
-    manifest.update(n_drones=m.swarm_size, nodes=[node_name(i) for i in [GROUND_ID, *m.drone_ids]])
-    nodes = NodeSet(cfg, run_dir, list(m.drone_ids))
     start = wall.time()
-    sitl = None
+    sitl = nodes = None
     try:
+        m = mission.load(cfg, build.rng_for(int(cfg.seed), "dataset"))
+        node_faults.check(cfg)
+        manifest.update(n_drones=m.swarm_size, nodes=[node_name(i) for i in [GROUND_ID, *m.drone_ids]])
+        nodes = NodeSet(cfg, run_dir, list(m.drone_ids))
         sitl, vehicles = autopilots(cfg, m, run_dir)
         nodes.start(key, vehicles)
         nodes.wait_ready(float(cfg.run.net.ready_timeout_s))
@@ -225,13 +226,13 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         manifest.update(status=status, reason=reason, node_results=results, ticks=g.get("ticks", 0),
                         sim_time_s=g.get("sim_time_s", 0.0))
     except KeyboardInterrupt:
-        nodes.stop()
-        manifest.update(status="aborted", reason="interrupted (Ctrl-C)", node_results=nodes.results())
+        manifest.update(status="aborted", reason="interrupted (Ctrl-C)")
     except Exception as exc:
-        nodes.stop()
-        manifest.update(status="failed", reason=f"{type(exc).__name__}: {exc}", node_results=nodes.results())
+        manifest.update(status="failed", reason=f"{type(exc).__name__}: {exc}")
     finally:
-        nodes.stop()
+        if nodes is not None:
+            nodes.stop()
+            manifest["node_results"] = manifest["node_results"] or nodes.results()
         if sitl is not None:
             sitl.stop()
         elapsed = max(wall.time() - start, 1e-9)

@@ -180,3 +180,17 @@ def test_formation_over_processes_on_px4_sitl(tmp_path):
     for i in range(4):
         assert manifest["node_results"][f"drone_{i}"]["status"] == "ok"
         assert (run_dir / "px4" / f"instance_{i}" / "out.log").exists()
+
+
+def test_network_fault_acts_on_the_real_network(tmp_path):
+    run_dir = tmp_path / "run"
+    proc = launch(run_dir, "algo=hover", "mission=hover", "fault=packet_loss", "fault.targets=[1]",
+                  "fault.onset_s=3", "fault.loss_prob=0.3")
+    manifest = finish(proc, run_dir)
+    assert manifest["status"] == "ok", manifest["_console"][-3000:]
+    msgs = pd.concat([messages(run_dir, n) for n in ("ground", "drone_0", "drone_1", "drone_2", "drone_3")])
+    lost = msgs[msgs["reason"] == "fault:packet_loss"]
+    assert len(lost) > 20
+    assert ((lost["src"] == 1) | (lost["dst"] == 1)).all()          # only drone 1's links
+    assert lost["t_s"].min() >= 3.0 - 0.1
+    assert (events(run_dir, "ground")["name"] == "packet_loss_start").sum() == 1

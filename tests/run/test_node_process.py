@@ -65,3 +65,16 @@ def test_run_outcome_is_the_grounds_plus_what_happened_to_agents():
 def test_free_ports_are_distinct_and_bindable():
     ports = free_ports(5)
     assert len(set(ports)) == 5 and all(1024 < p < 65536 for p in ports)
+
+
+def test_a_fleet_fault_is_refused_before_any_process_starts(tmp_path):
+    from swarmbox.run.runner import execute
+    from tests.conftest import compose_config
+
+    cfg, choices = compose_config(["run.runtime=processes", "backend=mavsim", "fault=gps_drift",
+                                   "run.progress=false"])
+    manifest = execute(cfg, tmp_path, choices, [])
+    assert manifest["status"] == "failed"
+    assert "gps_drift cannot run with run.runtime=processes" in manifest["reason"]
+    assert not (tmp_path / "nodes").exists()
+    assert "key: null" in (tmp_path / "config.yaml").read_text()

@@ -41,3 +41,26 @@ def test_runtime_does_not_load_analysis_libraries():
             "print(sorted(bad)); sys.exit(1 if bad else 0)")
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_the_api_layer_depends_on_nothing_of_the_package_but_itself():
+    """api < core: Stage and every user-visible type live in swarmbox.api; core builds on them."""
+    for path in sorted((ROOT / "swarmbox" / "api").rglob("*.py")):
+        for mod in imports(path):
+            if mod.startswith("swarmbox"):   # the mission-area helper sits below the API
+                assert mod.startswith(("swarmbox.api", "swarmbox.area")), f"{path.name} imports {mod}"
+    from swarmbox.api import Stage
+    from swarmbox.core.stages import Stage as CoreStage
+    assert CoreStage is Stage
+
+
+def test_no_context_exposes_ground_truth_or_wire_messages():
+    from swarmbox.api import DroneContext, DroneState, GroundContext
+    assert "true_pos_ned_m" not in DroneState._fields
+    for ctx in (DroneContext, GroundContext):
+        for name in dir(ctx):
+            attr = getattr(ctx, name)
+            if isinstance(attr, property):
+                hint = str(attr.fget.__annotations__.get("return", ""))   # as written in the source
+                for wire in ("Heartbeat", "TaskCommand", "core.messages", "Telemetry"):
+                    assert wire not in hint, f"{ctx.__name__}.{name} returns {hint}"

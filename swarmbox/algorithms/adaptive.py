@@ -38,19 +38,57 @@ goes around).
 """
 
 import math
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from swarmbox.api import DroneAlgorithm, DroneContext, GroundAlgorithm, GroundContext, Setpoint, TaskCommand
+from swarmbox.api import DroneAlgorithm, DroneContext, GroundAlgorithm, GroundContext, Setpoint, Task
 
 from .adaptive_plan import avoid, away_from, cap, clearance, resample, rrt, shortcut
 
 GO, ARRIVED = 0, 1
 
 
+@dataclass
+class AdaptiveParams:
+    """Typed ``params`` (see ``conf/algo/adaptive.yaml``)."""
+
+    # the simulator's static bodies, seen by the planner and the fields
+    obstacles: list[Any] = field(default_factory=list)
+    leader: int = 0
+    goal_ne_m: list[float] = field(default_factory=lambda: [5.0, -45.0])
+    goal_radius_m: float = 2.0   # leader this close to the route's end: ARRIVED
+    # RRT sampling box [[n_min, e_min], [n_max, e_max]]
+    bounds_ne_m: list[list[float]] = field(default_factory=lambda: [[-40.0, -80.0], [80.0, 50.0]])
+    altitude_m: float = 5.0
+    altitude_gain: float = 1.0   # 1/s, vertical velocity per metre of altitude error
+    clearance_m: float = 6.0   # m kept from obstacles by the route
+    slot_clearance_m: float = 3.0   # m kept from obstacles by formation slots (squeezed toward the trail)
+    rrt_step_m: float = 5.0
+    rrt_goal_bias: float = 0.1
+    rrt_max_iters: int = 4000
+    shortcut_iters: int = 80
+    waypoint_spacing_m: float = 3.0
+    advance_m: float = 3.0   # next waypoint when the leader is this close
+    speed_m_s: float = 2.0   # leader cruise speed
+    lag_m: float = 3.0   # the leader slows down (to 1/4 at most) while the mean slot error exceeds lag_m/2
+    slow_radius_m: float = 3.0   # the leader slows down within this of its waypoint
+    v_max: float = 3.5
+    influence_m: float = 3.0   # obstacle repulsion range
+    k_obstacle: float = 2.0   # obstacle repulsion gain, m^3/s
+    k_formation: float = 0.6   # 1/s, attraction to the formation slot
+    separation_m: float = 3.0   # neighbour repulsion range
+    k_separation: float = 3.0   # 1/s
+    slot_tolerance_m: float = 1.5   # a follower is done within this of its slot
+    mark_period_s: float = 1.0
+
+
 class AdaptiveGround(GroundAlgorithm):
     """Plans the leader's route once, then streams the current waypoint to the leader."""
+
+    Params = AdaptiveParams
 
     def prep_once(self, ctx: GroundContext) -> None:
         p = ctx.params
@@ -79,13 +117,15 @@ class AdaptiveGround(GroundAlgorithm):
             self.arrived = True
             ctx.mark("goal_reached", n_m=here[0], e_m=here[1])
         n, e = self.route[self.index]
-        ctx.send_task(rep.src, code=ARRIVED if self.arrived else GO,
+        ctx.send_task(rep.id, code=ARRIVED if self.arrived else GO,
                       waypoint_ned_m=(n, e, -float(p["altitude_m"])), reliable=False)
 
 
 class AdaptiveDrone(DroneAlgorithm):
     """The leader (``params.leader``) flies the potential field and places the followers; the
     others fly to the slot their leader gives them, avoiding obstacles and each other."""
+
+    Params = AdaptiveParams
 
     def exec_once(self, ctx: DroneContext) -> None:
         p = ctx.params
@@ -171,7 +211,7 @@ class AdaptiveDrone(DroneAlgorithm):
             ctx.mark("formation", error_mean_m=self.lag_m, error_max_m=float(errors.max()),
                      clearance_min_m=min(clearance(p["obstacles"], n, e) for n, e in pts.tolist()))
 
-    def _follow(self, ctx: DroneContext, pos: np.ndarray, task: TaskCommand) -> np.ndarray:
+    def _follow(self, ctx: DroneContext, pos: np.ndarray, task: Task) -> np.ndarray:
         p = ctx.params
         head, _, rest = task.data.partition("|")
         others = np.array([q.split(",") for q in rest.split(";")], float) if rest else np.empty((0, 2))

@@ -1,4 +1,4 @@
-"""Geometry, global planning and potential fields of the adaptive swarm (see ``swarmbox.algorithms.adaptive``).
+"""Geometry, global planning and potential fields of the adaptive swarm (see ``.adaptive``).
 
 Obstacles are the mission's static obstacles as given in its config: ``{kind: segment, a, b,
 radius_m}``, ``{kind: box, center, size}`` or ``{kind: circle, center, radius_m}``, [north, east]

@@ -1,7 +1,7 @@
 """Airview (paper RQ5 case 1, hybrid): collaborative area coverage by sector partition.
 
 The ground splits the mission area into one rectangular sector per drone and assigns the sectors
-to the drones (one reliable TaskCommand each, at PREPARATION). Each drone then plans and flies a
+to the drones (one reliable task each, at PREPARATION). Each drone then plans and flies a
 lawnmower (boustrophedon) path over its own sector, and returns home. The ground estimates the
 covered fraction of the area from the drones' reported positions with a square sensor footprint
 and marks it periodically (marker ``coverage``; ``coverage_90`` once when 90 % is reached).
@@ -33,6 +33,7 @@ home and down to ``altitude_m``, not when it turns for home.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -45,7 +46,7 @@ from swarmbox.api import (
     GroundContext,
     Setpoint,
     Stage,
-    TaskCommand,
+    Task,
     mission_area,
 )
 
@@ -155,8 +156,25 @@ class CoverageMap:
         return float(self.cells.mean())
 
 
+@dataclass
+class AirviewParams:
+    """Typed ``params`` (see ``conf/algo/airview.yaml``)."""
+
+    altitude_m: float = 10.0   # lowest flight altitude (and the altitude drones descend to at home)
+    # each drone flies at its own altitude, this far apart (nearest sector lowest)
+    altitude_step_m: float = 1.2
+    sweep_width_m: float = 10.0   # at most this far between two legs (= 2 x footprint_m: no gaps)
+    footprint_m: float = 5.0   # half side of the square sensor footprint (11 x 11 one-metre cells)
+    min_alt_frac: float = 0.8   # the sensor counts above this fraction of altitude_m
+    lookahead_m: float = 8.0   # moving setpoint this far ahead: cruise at about 0.95 x 8 = 7.6 m/s
+    accept_m: float = 1.0   # horizontal waypoint acceptance radius
+    coverage_period_s: float = 1.0   # period of the ground's `coverage` marker
+
+
 class AirviewGround(GroundAlgorithm):
     """Assigns sectors at PREPARATION; tracks coverage during EXECUTION."""
+
+    Params = AirviewParams
 
     def prep_once(self, ctx: GroundContext) -> None:
         p = ctx.params
@@ -196,13 +214,15 @@ class AirviewDrone(DroneAlgorithm):
     ``altitude_m`` above home so that landing is short.
     """
 
+    Params = AirviewParams
+
     def __init__(self) -> None:
         self.path: list[Point] = []
         self.alt_m = 0.0
         self.k = 0
         self.phase = CLIMB
 
-    def on_task(self, ctx: DroneContext, task: TaskCommand) -> None:
+    def on_task(self, ctx: DroneContext, task: Task) -> None:
         if self.path or not task.data:
             return
         sector, self.alt_m = decode_task(task.data)

@@ -10,7 +10,7 @@ velocity plus the rotation of the offset) as feed-forward plus a proportional co
 follower with inferiors of its own relays the leader's state unchanged, so chains and trees of
 followers work too.
 
-Phases (the TaskCommand ``code``): ``HOLD`` hover above home, ``FOLLOW`` fly the formation,
+Phases (the task ``code``): ``HOLD`` hover above home, ``FOLLOW`` fly the formation,
 ``RETURN`` the leader is back over its launch point with heading 0 (the formation settles back
 over the launch grid; a drone completes there).
 
@@ -35,6 +35,7 @@ fixed tick count plus a per-axis proximity that could fire early.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 from swarmbox.api import (
     DroneAlgorithm,
@@ -42,7 +43,7 @@ from swarmbox.api import (
     GroundAlgorithm,
     GroundContext,
     Setpoint,
-    TaskCommand,
+    Task,
     wrap_angle,
 )
 
@@ -100,8 +101,28 @@ def track(ctx: DroneContext, target: Vec2, feed_forward: Vec2, yaw_rad: float) -
     return Setpoint.velocity(vn, ve, vd, yaw_rad)
 
 
+@dataclass
+class ChevronParams:
+    """Typed ``params`` (see ``conf/algo/chevron.yaml``)."""
+
+    leader: int = 0
+    altitude_m: float = 10.0
+    start_s: float = 15.0   # hover above home this long before the circle starts
+    radius_m: float = 60.0   # the leader's circle (centre 60 m west of the leader's launch point)
+    speed_m_s: float = 3.0   # leader speed on the circle: 0.05 rad/s, the 36-drone tail below 8 m/s
+    laps: float = 1.0
+    ramp_s: float = 8.0   # speed up to (and slow down from) speed_m_s over this long
+    gain_1_s: float = 1.5   # tracking law: v = v_slot + gain x position error
+    max_speed_m_s: float = 11.0
+    yaw_rate_tau_s: float = 0.5   # low-pass time constant of the leader's yaw rate
+    marker_period_s: float = 1.0   # each follower marks its formation error this often
+    home_tolerance_m: float = 1.0   # completion: back over the launch point (horizontal, m)
+
+
 class ChevronGround(GroundAlgorithm):
     """Streams the leader's path to the leader (and to nobody else)."""
+
+    Params = ChevronParams
 
     def exec_once(self, ctx: GroundContext) -> None:
         self.path = dict(ctx.params)
@@ -121,6 +142,8 @@ class ChevronGround(GroundAlgorithm):
 class ChevronDrone(DroneAlgorithm):
     """The leader flies the ground's path and relays its own state; followers keep their slots."""
 
+    Params = ChevronParams
+
     def exec_once(self, ctx: DroneContext) -> None:
         p = ctx.params
         self.leader = int(p["leader"])
@@ -133,7 +156,7 @@ class ChevronDrone(DroneAlgorithm):
         self.phase = HOLD
         self.settled = False
 
-    def on_task(self, ctx: DroneContext, task: TaskCommand) -> None:
+    def on_task(self, ctx: DroneContext, task: Task) -> None:
         if ctx.id != self.leader:   # a follower relays the leader's state down its own subtree
             for drone in ctx.inferiors:
                 ctx.send_task(drone, code=task.code, waypoint_ned_m=task.waypoint_ned_m,
@@ -155,7 +178,7 @@ class ChevronDrone(DroneAlgorithm):
         self.settled = self.phase == RETURN and self._at_home(ctx)
         return sp
 
-    def _follow(self, ctx: DroneContext, task: TaskCommand, ff: tuple[float, ...]) -> Setpoint:
+    def _follow(self, ctx: DroneContext, task: Task, ff: tuple[float, ...]) -> Setpoint:
         psi = task.yaw_rad or 0.0
         slot = rotate(self.offset, psi)
         ln, le, _ = task.waypoint_ned_m

@@ -8,7 +8,7 @@ altitude and back; pickup and drop-off are instantaneous, a delivery counts on a
 
 The ground (the dispatcher) sorts the packages and, by ``params.assign``:
 
-- ``block`` / ``rr``: in PREPARATION sends every drone its whole list (TaskCommand code PLAN, possibly
+- ``block`` / ``rr``: in PREPARATION sends every drone its whole list (task code PLAN, possibly
   empty); the drone is ready once it has its list;
 - ``dynamic``: on entering EXECUTION sends every drone one package (code NEXT); each time a drone's
   Report shows its package delivered it sends the next package in sorted order, or END when none is
@@ -43,9 +43,10 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from dataclasses import dataclass
 from enum import Enum
 
-from swarmbox.api import DroneAlgorithm, DroneContext, GroundAlgorithm, GroundContext, Setpoint, TaskCommand
+from swarmbox.api import DroneAlgorithm, DroneContext, GroundAlgorithm, GroundContext, Setpoint, Task
 
 from .delivery_plan import (
     END,
@@ -67,8 +68,22 @@ from .delivery_plan import (
 __all__ = ["DeliveryDrone", "DeliveryGround", "paper_points", "random_points"]
 
 
+@dataclass
+class DeliveryParams:
+    """Typed ``params`` (see ``conf/algo/delivery_base.yaml``)."""
+
+    sort: str = 'distance'   # none | azimuth | distance (from the origin)
+    assign: str = 'dynamic'   # block | rr | dynamic
+    cruise_altitude_m: float = 10.0   # drone d cruises at cruise_altitude_m + altitude_step_m * d
+    altitude_step_m: float = 2.0
+    arrival_tolerance_m: float = 0.7   # a point is reached within this distance (3-D) ...
+    arrival_speed_m_s: float = 0.7   # ... and below this speed
+
+
 class DeliveryGround(GroundAlgorithm):
     """The dispatcher: sorts, assigns, records deliveries, holds EXECUTION until all are delivered."""
+
+    Params = DeliveryParams
 
     def prep_once(self, ctx: GroundContext) -> None:
         self.strategy = strategy_of(ctx.params)
@@ -149,6 +164,8 @@ class Phase(Enum):
 class DeliveryDrone(DroneAlgorithm):
     """Flies its packages one round trip at a time, in the order the ground gave them."""
 
+    Params = DeliveryParams
+
     def __init__(self) -> None:
         self.queue: deque[Package] = deque()   # received, not yet flown, in the ground's order
         self.delivered: list[int] = []         # package ids, in delivery order
@@ -157,7 +174,7 @@ class DeliveryDrone(DroneAlgorithm):
     def prep_once(self, ctx: DroneContext) -> None:
         self.strategy = strategy_of(ctx.params)
 
-    def on_task(self, ctx: DroneContext, task: TaskCommand) -> None:
+    def on_task(self, ctx: DroneContext, task: Task) -> None:
         if task.code in (PLAN, NEXT):
             packages = decode_packages(task.data)
             self.queue.extend(packages)

@@ -16,7 +16,7 @@ capped at ``v_max``. ``D(r, a, p)`` is the braking curve: 0 for r ≤ 0, ``r·p`
 ``sqrt(2ar − a²/p²)`` beyond. Only neighbours within the communication range ``r_comm_m`` count.
 
 The ground computes the whole swarm's velocities every ``1/command_hz`` s from the drones' Reports (a
-k-d tree keeps the neighbour search O(N log N)) and sends each drone one unreliable TaskCommand: code
+k-d tree keeps the neighbour search O(N log N)) and sends each drone one unreliable task: code
 FLOCK with the velocity in ``waypoint_ned_m`` (north, east, 0). That is O(N) messages per command,
 where a drone-side version listening to every peer's Heartbeat would need O(N²). Drones climb to
 ``altitude_m`` above home, then fly the commanded velocity with altitude hold; the ground starts the
@@ -34,12 +34,13 @@ fallback never fired); neighbours are limited to ``r_comm_m``; velocities are ho
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from swarmbox.api import DroneAlgorithm, DroneContext, GroundAlgorithm, GroundContext, Setpoint, TaskCommand
+from swarmbox.api import DroneAlgorithm, DroneContext, GroundAlgorithm, GroundContext, Setpoint, Task
 
 TAKEOFF, FLOCK, BRAKE = 0, 1, 2
 
@@ -117,8 +118,40 @@ def order_parameter(vel: np.ndarray) -> float:
     return total / norms if norms > 1e-9 else math.nan
 
 
+@dataclass
+class FlockingParams:
+    """Typed ``params`` (see ``conf/algo/flocking.yaml``)."""
+
+    # the arena walls: the simulator's static bodies, seen by the model
+    obstacles: list[Any] = field(default_factory=list)
+    altitude_m: float = 5.0
+    altitude_gain: float = 1.0   # 1/s, vertical velocity per metre of altitude error
+    takeoff_timeout_s: float = 30.0   # start flocking after this even if a drone is not yet up
+    flock_s: float = 90.0   # flocking time, then BRAKE
+    command_hz: float = 20.0   # velocity command rate
+    stale_s: float = 1.0   # a drone without a command for this long brakes
+    mark_period_s: float = 1.0   # period of the 'flock' marker
+    r_comm_m: float = 50.0   # communication (neighbour) range
+    v_flock: float = 4.0   # m/s, preferred speed
+    v_max: float = 6.0   # m/s, cap of the desired velocity
+    r0_rep: float = 8.0   # m, repulsion range
+    p_rep: float = 0.5   # 1/s, repulsion gain
+    r0_frict: float = 85.3   # m, alignment: distance where the braking curve starts
+    C_frict: float = 0.05   # alignment gain
+    v_frict: float = 0.63   # m/s, velocity difference always tolerated
+    p_frict: float = 5.2   # 1/s
+    a_frict: float = 4.16   # m/s^2
+    r0_shill: float = 0.3   # m, walls: distance where the braking curve starts
+    v_shill: float = 13.6   # m/s, shill agents' speed (into the arena)
+    p_shill: float = 3.55   # 1/s
+    a_shill: float = 3.02   # m/s^2
+    C_shill: float = 1.0   # wall gain
+
+
 class FlockingGround(GroundAlgorithm):
     """Computes every drone's velocity from its Reports and streams it as a FLOCK command."""
+
+    Params = FlockingParams
 
     def exec_once(self, ctx: GroundContext) -> None:
         angles = ctx.rng.uniform(0.0, 2 * math.pi, size=len(ctx.mission.initial_positions))
@@ -165,10 +198,12 @@ class FlockingGround(GroundAlgorithm):
 class FlockingDrone(DroneAlgorithm):
     """Climbs above home, then flies the ground's velocity commands at constant altitude."""
 
+    Params = FlockingParams
+
     def exec_once(self, ctx: DroneContext) -> None:
         self.heard_s = -math.inf
 
-    def on_task(self, ctx: DroneContext, task: TaskCommand) -> None:
+    def on_task(self, ctx: DroneContext, task: Task) -> None:
         self.heard_s = ctx.time_s
 
     def exec_loop(self, ctx: DroneContext) -> Setpoint:

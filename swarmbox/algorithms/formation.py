@@ -12,13 +12,30 @@ at the origin), and the circle ends after exactly ``laps`` turns of 2π.
 """
 
 import math
+from dataclasses import dataclass
 
 from swarmbox.api import DroneAlgorithm, DroneContext, GroundAlgorithm, GroundContext, Setpoint, wrap_angle
 
 HOLD, FOLLOW = 0, 1
 
 
+@dataclass
+class FormationParams:
+    """Typed ``params`` (see ``conf/algo/formation.yaml``)."""
+
+    leader: int = 0   # whose launch point is the formation's reference
+    radius_m: float = 9.0   # circle radius
+    altitude_m: float = 3.0
+    start_s: float = 30.0   # EXECUTION time at which the circle starts (hold before)
+    angular_rate_rad_s: float = 0.13333   # 40/300 rad/s: one lap in ~47 s at ~1.2 m/s
+    laps: float = 1.0
+    complete_after_s: float = 50.0   # a drone is done after this long, once back within tolerance of home
+    home_tolerance_m: float = 1.0   # per axis (north, east)
+
+
 class FormationGround(GroundAlgorithm):
+    Params = FormationParams
+
     def exec_loop(self, ctx: GroundContext) -> None:
         p = ctx.params
         r, alt = float(p["radius_m"]), float(p["altitude_m"])
@@ -34,6 +51,8 @@ class FormationGround(GroundAlgorithm):
 
 
 class FormationDrone(DroneAlgorithm):
+    Params = FormationParams
+
     def exec_once(self, ctx: DroneContext) -> None:
         ln, le, _ = ctx.mission.initial_positions[int(ctx.params["leader"])]
         hn, he, _ = ctx.home_ned_m

@@ -1,10 +1,22 @@
 """Hover: take off above home, hold for a while, land. The smallest complete algorithm."""
 
+from dataclasses import dataclass
+
 from swarmbox.api import DroneAlgorithm, DroneContext, Setpoint
+
+
+@dataclass
+class HoverParams:
+    """Typed ``params`` (see ``conf/algo/hover.yaml``)."""
+
+    altitude_m: float = 3.0
+    hover_s: float = 5.0   # seconds at altitude before reporting complete
 
 
 class HoverDrone(DroneAlgorithm):
     """Params: ``altitude_m`` (above home), ``hover_s`` (time at altitude before completing)."""
+
+    Params = HoverParams
 
     def exec_once(self, ctx: DroneContext) -> None:
         n, e, _ = ctx.home_ned_m

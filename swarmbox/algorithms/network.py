@@ -44,7 +44,7 @@ positions to ids by their order).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -57,7 +57,7 @@ from swarmbox.api import (
     GroundContext,
     Setpoint,
     Stage,
-    TaskCommand,
+    Task,
     mission_area,
     mission_grid,
 )
@@ -152,8 +152,34 @@ def schedule(params: dict, values: dict[int, tuple[float, ...]]) -> dict:
     return out
 
 
+@dataclass
+class NetworkParams:
+    """Typed ``params`` (see ``conf/algo/network.yaml``)."""
+
+    altitude_m: float = 10.0
+    layers: int = 4   # drones fly on this many altitudes (by id rank), layer_step_m apart:
+    layer_step_m: float = 2.0   # repulsion acts on positions up to 1 s old; layers make contacts rarer
+    broadcast_period_s: float = 1.0   # heat map (+ positions) broadcast period
+    broadcast_positions: bool = True   # include every drone's reported position and velocity in the broadcast
+    warmup_s: float = 5.0   # whole-area demand first (a mission's values 3 may replace these three)
+    phase_s: float = 20.0   # then each quadrant of `schedule` this long, then the whole area again
+    schedule: list[str] = field(default_factory=lambda: ['sw', 'se', 'ne', 'nw'])
+    duration_s: float = 105.0   # a drone completes after this long in EXECUTION
+    coverage_radius_m: float = 10.0   # a drone serves the demand within this radius (the metric)
+    sense_radius_m: float = 25.0   # the local rule looks this far around the drone
+    sample_m: float = 2.0   # sample spacing of the local rule's demand integral
+    update_period_s: float = 0.25   # how often the local target is recomputed
+    control_period_s: float = 0.1   # how often the velocity is recomputed (held in between)
+    gain_1_s: float = 0.6   # v = gain x (target - position) + repulsion
+    max_speed_m_s: float = 5.0
+    separation_m: float = 12.0   # repulsion radius: spreads a crowd fast (Lloyd alone diffuses slowly)
+    repulsion_gain_m_s: float = 3.0   # repulsion speed at contact (grows linearly from 0 at separation_m)
+
+
 class NetworkGround(GroundAlgorithm):
     """Broadcasts the demand (and positions); measures the demand coverage."""
+
+    Params = NetworkParams
 
     def exec_once(self, ctx: GroundContext) -> None:
         self.area = mission_area(ctx.mission.values, "network")
@@ -218,6 +244,8 @@ class LocalRule:
 class NetworkDrone(DroneAlgorithm):
     """Lloyd-style local coverage rule on the broadcast demand; velocity setpoints only."""
 
+    Params = NetworkParams
+
     def __init__(self) -> None:
         self.grid: np.ndarray | None = None
         self.tracks: dict[int, Track] = {}
@@ -230,7 +258,7 @@ class NetworkDrone(DroneAlgorithm):
         self.next_update_s = self.next_control_s = 0.0
         self.climbed = False
 
-    def on_task(self, ctx: DroneContext, task: TaskCommand) -> None:
+    def on_task(self, ctx: DroneContext, task: Task) -> None:
         if not task.data:
             return
         self.grid, self.tracks = decode(task.data)

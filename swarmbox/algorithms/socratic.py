@@ -32,6 +32,7 @@ at a coverage fraction; the separation term is bounded; yaw is set; seeded rando
 """
 
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -53,8 +54,37 @@ def decode_points(text: str) -> np.ndarray:
     return np.array([q.split(",") for q in text.split(";")], float) if text else np.empty((0, 2))
 
 
+@dataclass
+class SocraticParams:
+    """Typed ``params`` (see ``conf/algo/socratic.yaml``)."""
+
+    # [[n_min, e_min], [n_max, e_max]]
+    area_ne_m: list[list[float]] = field(default_factory=lambda: [[-80.0, -80.0], [80.0, 80.0]])
+    tile_m: float = 10.0
+    cover_radius_m: float = 4.0   # a tile is covered when a drone passes this close to its centre
+    coverage_goal: float = 0.95   # covered fraction that completes the mission
+    altitude_m: float = 5.0
+    auction_period_s: float = 0.5   # one call + clearing per period
+    candidates: int = 8   # tiles offered to each idle drone per round
+    blocked_s: float = 8.0   # a claim without 0.5 m of progress for this long is released
+    mark_period_s: float = 1.0
+    w_dist: float = 1.0   # bid cost: per metre to the tile
+    w_turn: float = 5.0   # bid cost: 1 - cos(turn toward the tile)
+    w_crowd: float = 10.0   # bid cost: neighbours near the tile
+    step_m: float = 3.0   # motion: reach of one planning step
+    samples: int = 50   # motion: random candidate steps per tick
+    w_goal: float = 2.0   # motion cost weights
+    w_vel: float = 0.5
+    w_sep: float = 10.0
+    body_m: float = 0.6   # m, two drone radii: separation cost is bounded below this gap
+    safe_m: float = 2.0   # m, separation cost x10 below this distance
+    sensing_m: float = 8.0   # m, neighbours relayed to each drone
+
+
 class SocraticGround(GroundAlgorithm):
     """Auctioneer and coverage bookkeeper; relays each drone's neighbours to it every tick."""
+
+    Params = SocraticParams
 
     def exec_once(self, ctx: GroundContext) -> None:
         p = ctx.params
@@ -164,6 +194,8 @@ class SocraticGround(GroundAlgorithm):
 
 class SocraticDrone(DroneAlgorithm):
     """Bids for tiles when called; flies to its tile by sampled cost minimization."""
+
+    Params = SocraticParams
 
     def exec_once(self, ctx: DroneContext) -> None:
         self.centres = tile_centres(ctx.params["area_ne_m"], float(ctx.params["tile_m"]))

@@ -3,7 +3,7 @@ target; sector sentinels wait at standby points and join the tracker when the ta
 their sector (an event-triggered rendezvous).
 
 The ground owns every decision. At PREPARATION it gives each drone its role with one reliable
-TaskCommand: the ``tracker`` (params) waits over the area's centre; every other drone becomes a
+task: the ``tracker`` (params) waits over the area's centre; every other drone becomes a
 sentinel of one sector of a rows × cols grid over the area, with a standby point in that sector.
 In EXECUTION the ground moves the target (a random-waypoint walk at ``target_speed_m_s`` drawn
 from its seeded ``rng``, appearing after ``start_s``) and streams, every tick, to each *active*
@@ -41,6 +41,7 @@ is detected and timed, not only implied.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -52,7 +53,7 @@ from swarmbox.api import (
     GroundAlgorithm,
     GroundContext,
     Setpoint,
-    TaskCommand,
+    Task,
     mission_area,
     mission_grid,
 )
@@ -118,8 +119,30 @@ class RandomWalkTarget:
         return (dn / dist * self.speed, de / dist * self.speed)
 
 
+@dataclass
+class TrackingParams:
+    """Typed ``params`` (see ``conf/algo/tracking.yaml``)."""
+
+    tracker: int = 0   # the active tracker; every other drone is a sector sentinel
+    altitude_m: float = 10.0   # the tracker's altitude
+    layer_step_m: float = 2.0   # sentinels fly above: one altitude per sentinel of a sector, neighbour
+    start_s: float = 15.0   # the target appears this long into EXECUTION (everyone at standby)
+    target_speed_m_s: float = 4.0
+    target_margin_m: float = 10.0   # the target's random waypoints stay this far inside the area
+    ring_m: float = 5.0   # ring radius around the target (tracker due south)...
+    min_spacing_m: float = 4.0   # ...enlarged so that neighbours on the ring stay this far apart
+    standby_frac: float = 0.5   # standby points: on a circle of this fraction of the sector's half size
+    gain_1_s: float = 1.2   # pursuit: v = v_target + gain x (slot - position)
+    max_speed_m_s: float = 11.0
+    stale_s: float = 0.5   # no slot update for this long: hold the last slot
+    rendezvous_m: float = 3.0   # a sentinel has joined when within this of its slot
+    duration_s: float = 150.0   # a drone completes after this long in EXECUTION
+
+
 class TrackingGround(GroundAlgorithm):
     """Assigns roles, moves the target, commands the active drones, detects rendezvous."""
+
+    Params = TrackingParams
 
     def prep_once(self, ctx: GroundContext) -> None:
         p = ctx.params
@@ -211,16 +234,18 @@ class TrackingGround(GroundAlgorithm):
 class TrackingDrone(DroneAlgorithm):
     """Waits at its standby point, or pursues its ring slot around the target while active."""
 
+    Params = TrackingParams
+
     def __init__(self) -> None:
         self.role = ""
         self.standby: tuple[float, float, float] | None = None
         self.mode = STANDBY
-        self.slot: TaskCommand | None = None
+        self.slot: Task | None = None
         self.slot_time_s = -1e9
         self.last_seq = -1
         self.climbed = False
 
-    def on_task(self, ctx: DroneContext, task: TaskCommand) -> None:
+    def on_task(self, ctx: DroneContext, task: Task) -> None:
         if task.seq < self.last_seq:   # a late, older command: ignore it
             return
         self.last_seq = task.seq

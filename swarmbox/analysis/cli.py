@@ -9,7 +9,14 @@ from pathlib import Path
 
 import matplotlib
 
-from swarmbox.analysis.compare import CompareInputError, compare, has_regression, load_config, load_summary
+from swarmbox.analysis.compare import (
+    CompareInputError,
+    baseline_tolerances,
+    compare,
+    has_regression,
+    load_config,
+    load_summary,
+)
 from swarmbox.analysis.load import RunLoadError, find_runs
 from swarmbox.analysis.outputs import metrics_table, write_run, write_sweep
 from swarmbox.analysis.report import AnalysisOptions, RunAnalysis, analyze_run
@@ -114,7 +121,8 @@ def _compare_parser() -> argparse.ArgumentParser:
                                 description="Compare two summary CSVs; exit 1 on regression, 2 on bad input.")
     p.add_argument("baseline", type=Path, help="baseline summary.csv (or a run's metrics.csv)")
     p.add_argument("current", type=Path, help="current summary.csv (or a run's metrics.csv)")
-    p.add_argument("--config", type=Path, help="YAML with default/metrics tolerances and directions")
+    p.add_argument("--config", type=Path, help="YAML with default/metrics tolerances and directions "
+                   "(default: tolerances.yaml beside BASELINE, if there is one)")
     p.add_argument("--rtol", type=float, help="relative tolerance for every metric not in the YAML")
     p.add_argument("--atol", type=float, help="absolute tolerance for every metric not in the YAML")
     p.add_argument("--ignore", nargs="+", default=[], help="metrics to leave out")
@@ -131,7 +139,10 @@ def compare_main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:
         return EXIT_OK if exc.code == 0 else EXIT_BAD_INPUT
     try:
-        config = load_config(args.config, rtol=args.rtol, atol=args.atol, ignore=tuple(args.ignore),
+        tolerances = args.config or baseline_tolerances(args.baseline)
+        if tolerances is not None and args.config is None:
+            print(f"tolerances: {tolerances}")
+        config = load_config(tolerances, rtol=args.rtol, atol=args.atol, ignore=tuple(args.ignore),
                              allow_missing=args.allow_missing)
         verdicts = compare(load_summary(args.baseline), load_summary(args.current), config)
     except CompareInputError as exc:

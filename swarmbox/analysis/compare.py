@@ -6,9 +6,14 @@ column (any column that is not a statistic, e.g. ``algo``).
 
 Per row, with baseline b, current c and tolerance tol = max(atol, rtol * |b|) (atol alone when b is
 infinite): for a *lower is better* metric, c - b > tol is ``worse`` and b - c > tol ``better``; mirrored
-for *higher is better*; a metric without a direction is only ``changed`` or ``ok``. A row present in
-the baseline but absent or NaN in the current table is ``missing`` / ``nan``. ``worse``, ``missing``
-and ``nan`` are regressions (``missing`` can be allowed).
+for *higher is better*; a metric without a direction is ``changed`` beyond its tolerance (a
+regression: nobody said a change of it is harmless) unless the tolerance file marks it
+``informational``, then ``info``. A row present in the baseline but absent or NaN in the current
+table is ``missing`` / ``nan``. ``worse``, ``changed``, ``missing`` and ``nan`` are regressions
+(``missing`` can be allowed).
+
+A baseline directory carries its own tolerances: without ``--config``, a ``tolerances.yaml`` next to
+the baseline CSV is used.
 
 Tolerances and directions, by precedence: the YAML file's ``metrics.<name>`` entry; the ``--rtol`` /
 ``--atol`` flags; the built-in defaults below; ``default`` (rtol 0.05, atol 1e-9). Directions come
@@ -19,6 +24,7 @@ from the YAML, then the baseline's ``direction`` column, then the built-in catal
     metrics:
       mission_duration_s: {rtol: 0.1, atol: 0.5}
       my_metric_mean: {direction: higher}
+      busy_s_mean: {informational: true}   # no direction: report a change, never fail on it
       real_time_factor: {rtol: 0.3}    # an entry without ``ignore`` compares a metric ignored by default
 """
 
@@ -35,7 +41,9 @@ import yaml
 from swarmbox.analysis.catalog import Direction, direction_of
 
 STAT_COLUMNS = {"metric", "n", "mean", "value", "median", "std", "ci_low", "ci_high", "direction", "unit"}
-REGRESSIONS = {"worse", "missing", "nan"}
+REGRESSIONS = {"worse", "changed", "missing", "nan"}
+#: Name of the tolerance file that travels with a baseline.
+BASELINE_TOLERANCES = "tolerances.yaml"
 
 
 class CompareInputError(ValueError):
@@ -48,6 +56,7 @@ class Tolerance:
     atol: float = 1e-9
     direction: Direction = None
     ignore: bool = False
+    informational: bool = False   # a change of a metric without direction is reported, not failed
 
 
 #: Built-in tolerances: what noise or run-to-run variation is acceptable for each metric.
@@ -99,7 +108,7 @@ def _direction(value: Any) -> Direction:
 def _tolerance(entry: Any, where: str, base: Tolerance | None = None) -> Tolerance:
     if not isinstance(entry, dict):
         raise CompareInputError(f"{where}: expected a mapping, got {entry!r}")
-    unknown = set(entry) - {"rtol", "atol", "direction", "ignore"}
+    unknown = set(entry) - {"rtol", "atol", "direction", "ignore", "informational"}
     if unknown:
         raise CompareInputError(f"{where}: unknown key(s) {sorted(unknown)}")
     if entry.get("direction") not in (None, "lower", "higher"):
@@ -107,7 +116,8 @@ def _tolerance(entry: Any, where: str, base: Tolerance | None = None) -> Toleran
     try:
         base = base or Tolerance()
         return Tolerance(float(entry.get("rtol", base.rtol)), float(entry.get("atol", base.atol)),
-                         entry.get("direction"), bool(entry.get("ignore", False)))
+                         entry.get("direction"), bool(entry.get("ignore", False)),
+                         bool(entry.get("informational", base.informational)))
     except (TypeError, ValueError) as exc:
         raise CompareInputError(f"{where}: rtol and atol must be numbers") from exc
 
@@ -127,6 +137,12 @@ def load_config(path: Path | None, **overrides: Any) -> CompareConfig:
                for k, v in (raw.get("metrics") or {}).items()}
     allow = bool(overrides.pop("allow_missing", False) or raw.get("allow_missing", False))
     return CompareConfig(default, metrics, allow_missing=allow, **overrides)
+
+
+def baseline_tolerances(baseline: Path) -> Path | None:
+    """The tolerance file shipped with a baseline (``tolerances.yaml`` beside it), if any."""
+    path = Path(baseline).parent / BASELINE_TOLERANCES
+    return path if path.is_file() else None
 
 
 def load_summary(path: Path) -> pd.DataFrame:
@@ -165,7 +181,7 @@ def verdict(base: float, cur: float, tol: Tolerance) -> str:
     allowed = max(tol.atol, tol.rtol * abs(base)) if math.isfinite(base) else tol.atol
     delta = cur - base
     if tol.direction is None:
-        return "changed" if abs(delta) > allowed else "ok"
+        return "ok" if abs(delta) <= allowed else "info" if tol.informational else "changed"
     gain = delta if tol.direction == "higher" else -delta
     return "better" if gain > allowed else "worse" if gain < -allowed else "ok"
 

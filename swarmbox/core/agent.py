@@ -1,15 +1,28 @@
 """A drone's agent node: the per-agent state machine that mirrors the ground's.
 
-Per tick: read telemetry -> drain the inbox (Heartbeats may move the stage; tasks go to
-``on_task``) -> superior watchdog (handover / failsafe) -> inferior bookkeeping -> stage work (user
-hooks, setpoint to the vehicle) -> Heartbeat and Report out -> task retries -> state row.
+Per tick: read telemetry -> drain the inbox (Heartbeats, and tasks from the superior, may move the
+stage; tasks go to ``on_task`` in order, never ahead of their stage's ``*_once``) -> superior
+watchdog (handover / failsafe) -> inferior bookkeeping -> stage work (user hooks, setpoint to the
+vehicle) -> Heartbeat and Report out -> task retries -> state row.
 """
 
 from __future__ import annotations
 
-from swarmbox.api import DroneAlgorithm, DroneContext, Setpoint, SetpointKind, Telemetry
+from swarmbox.api import (
+    DescendantState,
+    DroneAlgorithm,
+    DroneContext,
+    DroneState,
+    PeerState,
+    Setpoint,
+    SetpointKind,
+    SetpointVerdict,
+    Task,
+    Telemetry,
+)
+from swarmbox.core.delivery import Window
 from swarmbox.core.messages import Heartbeat, ProxAlert, Report, TaskAck, TaskCommand
-from swarmbox.core.node import Node, call_hook
+from swarmbox.core.node import STAGE_OF, Node, call_hook
 from swarmbox.core.stages import TERMINAL, Stage, path_to
 
 _KIND_NAMES = {SetpointKind.POSITION: "position", SetpointKind.VELOCITY: "velocity",
@@ -17,6 +30,7 @@ _KIND_NAMES = {SetpointKind.POSITION: "position", SetpointKind.VELOCITY: "veloci
 _LOOP_HOOK = {Stage.PREPARATION: "prep_loop/prep_complete", Stage.EXECUTION: "exec_loop/exec_complete"}
 _NAN = float("nan")
 _NAN3 = (_NAN, _NAN, _NAN)
+_OK = SetpointVerdict("ok")
 
 
 class AgentNode(Node):
@@ -30,13 +44,15 @@ class AgentNode(Node):
         self.removed = False
         self.reason = ""
         self.report_data = ""
-        self.last_task: TaskCommand | None = None
-        self.prox_alert: ProxAlert | None = None
-        self.peer_heartbeats: dict[int, Heartbeat] = {}
+        self.last_task: Task | None = None
+        self.proximity: tuple[DescendantState, ...] = ()
+        self.peer_view: dict[int, PeerState] = {}
+        self._own: DroneState | None = None
         self._sup_silent, self._heard_superior = 0, False
         self._successor_list: tuple[int, ...] = ()
         self._abandoned: set[int] = set()
-        self._seen_tasks: dict[int, set[int]] = {}
+        t = self.timing
+        self._window = Window(t.task_retry_ticks * (t.task_max_retries + 2))
         self._gnss_seq = -1
         self._exec_done = False
         self._log_state = kw["log"].appender("state")
@@ -47,6 +63,7 @@ class AgentNode(Node):
     def tick(self) -> None:
         self.stage_tick += 1
         tel = self.telemetry = self.vehicle.telemetry()
+        self._own = None
         if not tel.link_ok and self.stage not in TERMINAL:
             self.event("failsafe", "vehicle_link_lost", self.node_id, action="return_to_launch")
             self.enter(Stage.ABORT, "link to the autopilot lost", failsafe=True)
@@ -62,6 +79,12 @@ class AgentNode(Node):
         if self.stage in TERMINAL and (not tel.armed or self.stage_timed_out()):
             self.finished = True
 
+    def own_state(self) -> DroneState:
+        """This tick's telemetry without ground truth (built once, on first use)."""
+        if self._own is None:
+            self._own = DroneState.of(self.telemetry)
+        return self._own
+
     def _drain_inbox(self) -> None:
         inbox = self.inbox
         for msg in inbox:
@@ -70,30 +93,44 @@ class AgentNode(Node):
                 if msg.src == self.superior:
                     self._sup_silent, self._heard_superior = 0, True
                     self._successor_list = msg.successors
-                    self._follow(Stage(msg.stage))
+                    self._follow(STAGE_OF[msg.stage])
                 else:
-                    self.peer_heartbeats[msg.src] = msg
+                    self.peer_view[msg.src] = PeerState(msg.src, STAGE_OF[msg.stage], msg.pos_ned_m,
+                                                        msg.vel_ned_m_s, self.clock.now())
             elif kind is Report:
                 if self.on_report(msg):
-                    call_hook(self, "on_report", self.algorithm.on_report, self.ctx, msg)
+                    call_hook(self, "on_report", self.algorithm.on_report, self.ctx,
+                              self._alive[msg.src])
             elif kind is TaskCommand:
                 self._on_task(msg)
             elif kind is TaskAck:
                 self.on_ack(msg)
             elif kind is ProxAlert:
-                self.prox_alert = msg
+                self.proximity = msg.neighbours
         inbox.clear()
+        for src in self._window.holding():   # a stage change may have released held tasks
+            self._deliver_ready(src)
 
     def _on_task(self, cmd: TaskCommand) -> None:
-        if cmd.reliable:
-            self.net.send(TaskAck(self.next_msg_id(), self.clock.now(), self.node_id, cmd.src, cmd.seq),
-                          cmd.src)
-            seen = self._seen_tasks.setdefault(cmd.src, set())
-            if cmd.seq in seen:
-                return
-            seen.add(cmd.seq)
-        self.last_task = cmd
-        call_hook(self, "on_task", self.algorithm.on_task, self.ctx, cmd)
+        if cmd.src == self.superior and cmd.stage > self.stage and self.stage not in TERMINAL:
+            self._follow(STAGE_OF[cmd.stage])   # the task announces its sender's stage
+        if not cmd.reliable:
+            if cmd.stage <= self.stage or self.stage is Stage.ABORT:
+                self._deliver(cmd)   # best effort: one from a stage not reached yet is dropped
+            return
+        self.net.send(TaskAck(self.next_msg_id(), self.clock.now(), self.node_id, cmd.src, cmd.seq),
+                      cmd.src)
+        if self._window.accept(cmd, self.time.tick):
+            self._deliver_ready(cmd.src)
+
+    def _deliver_ready(self, src: int) -> None:
+        for cmd in self._window.release(src, int(self.stage), self.time.tick):
+            self._deliver(cmd)
+
+    def _deliver(self, cmd: TaskCommand) -> None:
+        task = self.last_task = Task(cmd.src, cmd.seq, cmd.reliable, cmd.code, cmd.waypoint_ned_m,
+                                     cmd.yaw_rad, cmd.data, self.clock.now())
+        call_hook(self, "on_task", self.algorithm.on_task, self.ctx, task)
 
     # -- stages ---------------------------------------------------------------------------------
     def _follow(self, commanded: Stage) -> None:
@@ -147,10 +184,10 @@ class AgentNode(Node):
         if type(sp) is not Setpoint:
             raise TypeError(f"drone {self.node_id}: exec_loop returned {type(sp).__name__}, "
                             "expected Setpoint or None")
-        verdict = self.vehicle.setpoint(sp) or "ok"
+        verdict = self.vehicle.setpoint(sp) or _OK
         n, e, d = sp.ned
         self._log_setpoint((self.clock.now(), self.time.tick, _KIND_NAMES[sp.kind], n, e, d,
-                            _NAN if sp.yaw_rad is None else sp.yaw_rad, verdict))
+                            _NAN if sp.yaw_rad is None else sp.yaw_rad, verdict.action, verdict.reason))
 
     # -- superior watchdog ----------------------------------------------------------------------
     def _watch_superior(self) -> None:

@@ -1,10 +1,14 @@
 """The ground node: the global swarm state machine.
 
-Per tick: drain the inbox (Reports, acks) -> Heartbeat out -> proximity alerts -> user hook ->
-inferior bookkeeping -> task retries -> stage transition. The ground advances when every *alive*
-direct inferior reports complete for the ground's current stage (ICEBREAK also needs the expected
-head-count); it aborts with a reason on a stage timeout or when fewer than ``min_alive`` drones
-remain, instead of stalling.
+Per tick: drain the inbox (Reports, acks) -> inferior bookkeeping -> stage transition (entering a
+stage runs its ``*_once`` hook) -> Heartbeat out, announcing the stage entered this very tick ->
+proximity alerts -> the stage's loop hook -> task retries. So a stage change takes effect and is
+announced in the same tick, and its ``*_once`` hook runs before its loop hook, exactly as on a drone.
+
+The ground advances when every *alive* direct inferior reports complete for the ground's current
+stage and the ground's own ``*_complete`` hook agreed on the previous tick (ICEBREAK also needs the
+expected head-count); it aborts with a reason on a stage timeout or when fewer than ``min_alive``
+drones remain, instead of stalling.
 """
 
 from __future__ import annotations
@@ -13,8 +17,8 @@ import math
 
 import numpy as np
 
-from swarmbox.api import GroundAlgorithm, GroundContext
-from swarmbox.core.messages import GROUND_ID, DescendantState, Heartbeat, ProxAlert, Report, TaskAck
+from swarmbox.api import DescendantState, GroundAlgorithm, GroundContext
+from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck
 from swarmbox.core.node import Node, call_hook
 from swarmbox.core.stages import TERMINAL, Stage
 
@@ -27,23 +31,25 @@ class GroundNode(Node):
         self.algorithm = algorithm
         self.ctx = GroundContext(self)
         self.reason = ""
+        self._satisfied = True   # the ground algorithm's *_complete verdict on its latest loop tick
 
     # -- the tick -------------------------------------------------------------------------------
     def tick(self) -> None:
         self.stage_tick += 1
         self._drain_inbox()
+        self.age_inferiors()
+        self._advance(self._satisfied)
         self.net.publish(Heartbeat(self.next_msg_id(), self.clock.now(), GROUND_ID, int(self.stage), (),
                                    _ZERO3, _ZERO3))
         self._proximity_alerts()
         stage = self.stage
-        satisfied = True
         if stage is Stage.PREPARATION:
-            satisfied = call_hook(self, "prep_loop", self.algorithm.run_stage, stage, self.ctx)
+            self._satisfied = call_hook(self, "prep_loop/prep_complete", self.algorithm.run_stage, stage,
+                                        self.ctx)
         elif stage is Stage.EXECUTION:
-            satisfied = call_hook(self, "exec_loop/exec_complete", self.algorithm.run_stage, stage, self.ctx)
-        self.age_inferiors()
+            self._satisfied = call_hook(self, "exec_loop/exec_complete", self.algorithm.run_stage, stage,
+                                        self.ctx)
         self.retry_tasks()
-        self._advance(satisfied)
 
     def _drain_inbox(self) -> None:
         inbox = self.inbox
@@ -51,7 +57,8 @@ class GroundNode(Node):
             kind = type(msg)
             if kind is Report:
                 if self.on_report(msg):
-                    call_hook(self, "on_report", self.algorithm.on_report, self.ctx, msg)
+                    call_hook(self, "on_report", self.algorithm.on_report, self.ctx,
+                              self._alive[msg.src])
             elif kind is TaskAck:
                 self.on_ack(msg)
         inbox.clear()
@@ -83,13 +90,19 @@ class GroundNode(Node):
 
     def enter(self, stage: Stage, reason: str = "") -> None:
         self.set_stage(stage, reason)
+        # a stage with ground hooks waits for its *_complete to be asked at least once
+        self._satisfied = stage not in (Stage.PREPARATION, Stage.EXECUTION)
         if stage is Stage.ABORT:
             self.reason = reason
         call_hook(self, f"{stage.name.lower()} entry", self.algorithm.enter_stage, stage, self.ctx)
 
     def _check_finished(self) -> None:
-        stage = int(self.stage)
-        settled = all(r.stage == stage and r.complete for r in self.alive_reports().values())
+        """Finished once every alive inferior has settled: reports this stage complete, or aborted
+        on its own and is down (an aborted drone never reports TERMINATION, so waiting for it would
+        only run out the timeout)."""
+        stage = self.stage
+        settled = all(r.complete and (r.stage is stage or r.stage is Stage.ABORT)
+                      for r in self.alive_reports().values())
         if settled or self.stage_timed_out():
             self.finished = True
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+from swarmbox.api.types import DescendantState
+
 GROUND_ID = -1
 #: Pseudo-node id under which the simulated network records drops.
 NET_ID = -2
@@ -47,14 +49,6 @@ class Heartbeat(NamedTuple):
         return _HEADER + 1 + 1 + 2 * len(self.successors) + 2 * _VEC3
 
 
-class DescendantState(NamedTuple):
-    """A drone's summary forwarded up the hierarchy inside its superior's Report."""
-
-    drone_id: int
-    stage: int
-    pos_ned_m: tuple[float, float, float]
-
-
 class Report(NamedTuple):
     """Inferior -> its superior, every tick: progress, head-count, own state, mission payload."""
 
@@ -81,8 +75,11 @@ class Report(NamedTuple):
 class TaskCommand(NamedTuple):
     """A superior's command to one inferior. Its meaning (``code``, ``data``) belongs to the algorithm.
 
-    ``reliable`` commands are acknowledged by a :class:`TaskAck` and re-sent until acknowledged;
-    the receiver drops duplicates by ``seq``.
+    ``reliable`` commands are numbered per (sender, receiver) from 1, acknowledged by a
+    :class:`TaskAck` and re-sent until acknowledged; ``floor`` is the lowest number the sender still
+    tries to deliver (lower ones are acknowledged or abandoned), so the receiver's window can skip
+    an abandoned gap. ``stage`` is the sender's stage at send time: the receiver hands the command to
+    its algorithm only once it is in that stage too. Best-effort commands carry their own counter.
     """
 
     msg_id: int
@@ -95,10 +92,12 @@ class TaskCommand(NamedTuple):
     waypoint_ned_m: tuple[float, float, float] | None
     yaw_rad: float | None
     data: str
+    stage: int = 0
+    floor: int = 0
 
     @property
     def nbytes(self) -> int:
-        return _HEADER + 4 + 1 + 1 + _VEC3 + 4 + 2 + len(self.data)
+        return _HEADER + 4 + 1 + 1 + _VEC3 + 4 + 2 + len(self.data) + 1 + 4
 
 
 class TaskAck(NamedTuple):

@@ -12,20 +12,16 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from swarmbox.api import MissionInfo
+from swarmbox.api.types import DescendantState, InferiorReport, MissionInfo, Stage
 from swarmbox.core.clock import NodeClock, TimeSource
-from swarmbox.core.messages import (
-    NO_SUBJECT,
-    DescendantState,
-    Report,
-    TaskAck,
-    TaskCommand,
-    make_msg_id,
-)
-from swarmbox.core.stages import Stage, check_transition
+from swarmbox.core.delivery import Outbox
+from swarmbox.core.messages import NO_SUBJECT, Report, TaskAck, TaskCommand, make_msg_id
+from swarmbox.core.stages import check_transition
 
 Row = tuple
 _ABORT = int(Stage.ABORT)
+#: Stage by code, for building views without an enum call per message.
+STAGE_OF = {int(s): s for s in Stage}
 
 
 class Transport(Protocol):
@@ -73,13 +69,6 @@ class _Inferior:
         self.report, self.silent_ticks, self.alive = report, 0, True
 
 
-class _Pending:
-    __slots__ = ("cmd", "next_tick", "retries")
-
-    def __init__(self, cmd: TaskCommand, next_tick: int) -> None:
-        self.cmd, self.next_tick, self.retries = cmd, next_tick, 0
-
-
 class Node:
     """Base of the ground node and the agent node."""
 
@@ -91,15 +80,14 @@ class Node:
         self.timing, self.tick_s = timing, timing.tick_s
         self.mission, self.params, self.rng = mission, params, rng
         self.stage = Stage.ICEBREAK
-        self.stage_tick = 0
+        self.stage_tick = -1          # the first tick counts 0, like every stage's entry tick
         self.finished = False
         self.inferiors: dict[int, _Inferior] = {}
-        self._alive: dict[int, Report] = {}          # latest Report of each alive inferior
+        self._alive: dict[int, InferiorReport] = {}  # latest Report of each alive inferior, as a view
         self._alive_view = MappingProxyType(self._alive)
         self.regroup_until_tick = -1   # a lost inferior's own inferiors may still be handing over
         self._seq = 0
-        self._task_seq: dict[int, int] = {}
-        self._pending: dict[tuple[int, int], _Pending] = {}
+        self.outbox = Outbox(timing.task_retry_ticks, timing.task_max_retries)
         self._log_stage = log.appender("stages")
         self._log_event = log.appender("events")
         self._log_stage((clock.now(), time.tick, int(Stage.ICEBREAK), Stage.ICEBREAK.name, ""))
@@ -140,7 +128,8 @@ class Node:
                 inf.alive = True
                 self.event("topology", "inferior_rejoined", rep.src)
             inf.report, inf.silent_ticks = rep, 0
-        self._alive[rep.src] = rep
+        self._alive[rep.src] = InferiorReport(rep.src, STAGE_OF[rep.stage], rep.complete, rep.pos_ned_m,
+                                              rep.vel_ned_m_s, rep.data, self.clock.now())
         return True
 
     def age_inferiors(self) -> None:
@@ -154,9 +143,9 @@ class Node:
                 if inf.report.total_count > 1:
                     # its inferiors notice only after lost_superior_ticks, then hand over to us
                     self.regroup_until_tick = self.time.tick + self.timing.lost_superior_ticks + limit
-                self._forget_pending(drone_id)
+                self.outbox.forget(drone_id)
 
-    def alive_reports(self) -> Mapping[int, Report]:
+    def alive_reports(self) -> Mapping[int, InferiorReport]:
         """Read-only view of the latest Report of each alive direct inferior."""
         return self._alive_view
 
@@ -195,35 +184,26 @@ class Node:
             self.event("error", "task_to_unknown_inferior", dst, code=code,
                        known=sorted(self.alive_reports()))
             return
-        seq = self._task_seq.get(dst, 0) + 1
-        self._task_seq[dst] = seq
+        seq, floor = self.outbox.number(dst, reliable)
         cmd = TaskCommand(self.next_msg_id(), self.clock.now(), self.node_id, dst, seq, reliable,
-                          int(code), waypoint, yaw_rad, data)
+                          int(code), waypoint, yaw_rad, data, int(self.stage), floor)
         self.net.send(cmd, dst)
         if reliable:
-            self._pending[(dst, seq)] = _Pending(cmd, self.time.tick + self.timing.task_retry_ticks)
+            self.outbox.track(cmd, self.time.tick)
 
     def on_ack(self, ack: TaskAck) -> None:
-        self._pending.pop((ack.src, ack.seq), None)
+        self.outbox.acked(ack.src, ack.seq)
 
     def retry_tasks(self) -> None:
-        if not self._pending:
+        outbox = self.outbox
+        if not outbox.busy:
             return
-        tick = self.time.tick
-        for key, p in list(self._pending.items()):
-            if tick < p.next_tick:
-                continue
-            if p.retries >= self.timing.task_max_retries:
-                del self._pending[key]
-                self.event("error", "task_undelivered", key[0], seq=key[1], retries=p.retries)
-                continue
-            p.retries += 1
-            p.next_tick = tick + self.timing.task_retry_ticks
-            self.net.send(p.cmd._replace(msg_id=self.next_msg_id(), t_sent_s=self.clock.now()), key[0])
-
-    def _forget_pending(self, dst: int) -> None:
-        for key in [k for k in self._pending if k[0] == dst]:
-            del self._pending[key]
+        resend, abandoned = outbox.due(self.time.tick)
+        for dst, seq, retries in abandoned:
+            self.event("error", "task_undelivered", dst, seq=seq, retries=retries)
+        for cmd in resend:
+            self.net.send(cmd._replace(msg_id=self.next_msg_id(), t_sent_s=self.clock.now(),
+                                       floor=outbox.floor(cmd.dst, cmd.seq)), cmd.dst)
 
 
 def call_hook(node: Node, hook: str, fn: Callable, *args: Any) -> Any:

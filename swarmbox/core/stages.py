@@ -1,19 +1,11 @@
-"""The mission lifecycle shared by the ground node and every agent: one enum, one transition table."""
+"""The mission lifecycle shared by the ground node and every agent: one transition table over the
+API's :class:`~swarmbox.api.Stage` enum."""
 
 from __future__ import annotations
 
-from enum import IntEnum
+from swarmbox.api.types import Stage
 
-
-class Stage(IntEnum):
-    """Mission stages. Codes match the reference implementation (ABORT is -1)."""
-
-    ABORT = -1
-    ICEBREAK = 1
-    PREPARATION = 2
-    EXECUTION = 3
-    LANDING = 4
-    TERMINATION = 5
+__all__ = ["TERMINAL", "TRANSITIONS", "IllegalTransition", "Stage", "check_transition", "path_to"]
 
 
 #: Legal transitions. Every stage but the two terminal ones may go to ABORT.

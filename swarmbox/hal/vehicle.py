@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, NamedTuple, Protocol, runtime_checkable
 
-from swarmbox.api import Setpoint, Telemetry
+from swarmbox.api import Setpoint, SetpointVerdict, Telemetry
 
 Vec3 = tuple[float, float, float]
 
@@ -46,11 +46,12 @@ class Vehicle(Protocol):
     def takeoff(self, alt_m: float) -> None:
         """Climb vertically to ``alt_m`` above home and hold."""
 
-    def setpoint(self, sp: Setpoint) -> None:
+    def setpoint(self, sp: Setpoint) -> SetpointVerdict:
         """Follow ``sp`` (position / velocity / acceleration, NED mission frame) in OFFBOARD mode.
 
         The backend's safety monitor refuses non-finite setpoints and clamps speed and geofence
-        violations, emitting a ``safety`` event.
+        violations, emitting a ``safety`` event; the returned verdict (ok / clamped / refused, or
+        ignored when the vehicle cannot follow setpoints now, with the reason) goes to the log.
         """
 
     def land(self) -> None:

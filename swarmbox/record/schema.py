@@ -96,7 +96,8 @@ TABLES: dict[str, tuple[Column, ...]] = {
         ("e", "float64", "", ""),
         ("d", "float64", "", ""),
         ("yaw_rad", "float64", "rad", "NaN: keep heading"),
-        ("verdict", "string", "", "safety monitor: ok | clamped | refused"),
+        ("verdict", "string", "", "safety monitor: ok | clamped | refused; ignored: vehicle disarmed"),
+        ("reason", "string", "", "why clamped, refused or ignored (empty when ok)"),
     ),
 }
 

@@ -24,6 +24,7 @@ from swarmbox.net.medium import LinkSpec, SimMedium
 from swarmbox.record.schema import node_name
 from swarmbox.record.writer import Recorder
 from swarmbox.run.mission import Mission
+from swarmbox.run.params import typed_params
 
 
 class ConfigError(ValueError):
@@ -132,13 +133,13 @@ def _algorithm(node: DictConfig | None, base: type, role: str) -> Any:
 
 
 def build_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> Swarm:
+    params = typed_params(cfg.algo)   # first: a bad param stops the run before anything exists
     seed = int(cfg.seed)
     timing = timing_of(cfg)
     topo = topology_of(cfg, mission)
     clocks = clocks_of(cfg, mission)
     time = TimeSource()
     medium = medium_of(cfg, time, seed, recorder, mission)
-    params = OmegaConf.to_container(cfg.algo.params, resolve=True)
     info = mission.info()
 
     def common(node_id: int) -> dict[str, Any]:

@@ -1,8 +1,10 @@
 """Conformance suites shipped with SwarmBox, for its own plug-ins and for yours.
 
-:mod:`swarmbox.testing.backend_suite` holds the checks every backend must pass.
+:mod:`swarmbox.testing.backend_suite` holds the checks every backend must pass;
+:mod:`swarmbox.testing.algorithm_suite` the one every algorithm must pass (:func:`check_algorithm`).
 """
 
+from swarmbox.testing.algorithm_suite import ConformanceError, ConformanceReport, check_algorithm
 from swarmbox.testing.backend_suite import (
     BACKEND_CHECKS,
     BackendFactory,
@@ -13,11 +15,13 @@ from swarmbox.testing.backend_suite import (
     check_nonfinite_setpoint_refused,
     check_protocol,
     check_return_to_launch,
+    check_setpoint_verdicts,
     run_backend_suite,
 )
 
 __all__ = [
-    "BACKEND_CHECKS", "BackendFactory", "Flight", "check_disarmed_setpoint_ignored", "check_hold_stops",
-    "check_mission_cycle", "check_nonfinite_setpoint_refused", "check_protocol", "check_return_to_launch",
+    "BACKEND_CHECKS", "BackendFactory", "ConformanceError", "ConformanceReport", "Flight", "check_algorithm",
+    "check_disarmed_setpoint_ignored", "check_hold_stops", "check_mission_cycle",
+    "check_nonfinite_setpoint_refused", "check_protocol", "check_return_to_launch", "check_setpoint_verdicts",
     "run_backend_suite",
 ]

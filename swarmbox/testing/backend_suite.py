@@ -18,6 +18,8 @@ Scenarios (two vehicles; the second is never commanded and must stay disarmed at
 - ``check_return_to_launch`` — RTL flies home without losing height, lands and disarms.
 - ``check_nonfinite_setpoint_refused`` — NaN/inf setpoints raise a ``safety`` event and the vehicle
   keeps its previous target.
+- ``check_setpoint_verdicts`` — ``setpoint`` returns the safety monitor's verdict (ok, clamped or
+  refused, with the reason) for every setpoint: what the framework writes to ``setpoints.parquet``.
 - ``check_hold_stops`` — ``hold()`` brakes a moving vehicle and keeps it still.
 - ``check_disarmed_setpoint_ignored`` — setpoints to a disarmed vehicle move nothing.
 
@@ -30,7 +32,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 
-from swarmbox.api import FlightMode, Setpoint, Telemetry
+from swarmbox.api import FlightMode, Setpoint, SetpointVerdict, Telemetry
 from swarmbox.hal.vehicle import Backend, Vehicle, VehicleEvent
 
 Vec3 = tuple[float, float, float]
@@ -248,9 +250,34 @@ def check_disarmed_setpoint_ignored(factory: BackendFactory, tick_s: float = 0.0
         backend.close()
 
 
+def check_setpoint_verdicts(factory: BackendFactory, tick_s: float = 0.025) -> None:
+    """Every setpoint gets a verdict: ok, clamped (geofence, ceiling, speed) or refused (non-finite,
+    absurd jump), each but ok with its reason."""
+    backend = _fleet(factory)
+    f, v, home = Flight(backend, tick_s), backend.vehicles[0], HOMES[0]
+    try:
+        f.airborne(0)
+        hold = Setpoint.position(*offset(home, 0.0, 0.0, -TAKEOFF_ALT_M))
+        cases = [(hold, "ok", ""),
+                 (Setpoint.position(math.nan, 0.0, -3.0), "refused", "non-finite"),
+                 (Setpoint.position(home[0] + 1500.0, home[1], -3.0), "refused", "away"),
+                 (Setpoint.position(home[0], home[1] + 600.0, -3.0), "clamped", "geofence"),
+                 (Setpoint.position(home[0], home[1], -200.0), "clamped", "ceiling"),
+                 (Setpoint.velocity(0.0, 100.0, 0.0), "clamped", "norm")]
+        for sp, action, reason in cases:
+            verdict = v.setpoint(sp)
+            assert isinstance(verdict, SetpointVerdict), f"setpoint returned {verdict!r}, not a verdict"
+            assert verdict.action == action and reason in verdict.reason, (sp, verdict)
+            assert (verdict.flown is None) == (action == "refused"), verdict
+            f.run_for(tick_s, lambda: v.setpoint(hold))
+        f.land_and_disarm(0)
+    finally:
+        backend.close()
+
+
 BACKEND_CHECKS: tuple[Callable[..., None], ...] = (
     check_protocol, check_mission_cycle, check_return_to_launch, check_nonfinite_setpoint_refused,
-    check_hold_stops, check_disarmed_setpoint_ignored,
+    check_hold_stops, check_disarmed_setpoint_ignored, check_setpoint_verdicts,
 )
 
 
@@ -258,3 +285,4 @@ def run_backend_suite(factory: BackendFactory) -> None:
     """Run every check against ``factory`` (raises AssertionError at the first failure)."""
     for check in BACKEND_CHECKS:
         check(factory)
+

@@ -22,7 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from swarmbox.api import Setpoint, Telemetry
+from swarmbox.api import Setpoint, SetpointVerdict, Telemetry
 from swarmbox.hal.mavlink.codec import (
     CMD_ARM_DISARM,
     CMD_LAND,
@@ -156,25 +156,26 @@ class Px4Vehicle:
         self._submit(CMD_TAKEOFF, (_NAN, 0.0, 0.0, _NAN, _NAN, _NAN, amsl),
                      lambda: self._set_mode(MODE_TAKEOFF))
 
-    def setpoint(self, sp: Setpoint) -> str:
+    def setpoint(self, sp: Setpoint) -> SetpointVerdict:
         verdict = check_setpoint(sp, self.telemetry(), self._limits)
         if verdict.action != "ok":
             self._emit("safety", "setpoint_" + verdict.action,
                        {"reason": verdict.reason, "kind": sp.kind.name.lower(),
                         "requested": [float(x) for x in sp.ned]})
         safe = verdict.setpoint
+        result = SetpointVerdict(verdict.action, verdict.reason, safe)
         if safe is None:
-            return verdict.action
+            return result
         if not self._armed or self.link_lost or self._blocked:
             reason = "disarmed" if not self._armed else ("link lost" if self.link_lost else self._blocked)
             self._deny("setpoint", reason)
-            return verdict.action
+            return SetpointVerdict("ignored", reason)
         local = self._frame.setpoint_to_local(safe)
         if local != self._sp:
             self._sp, self._sp_new = local, True
         if self._stream_since_s is None:
             self._stream_since_s = self._now
-        return verdict.action
+        return result
 
     def land(self) -> None:
         self._stop_offboard()

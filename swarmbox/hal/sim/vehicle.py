@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from typing import Any, Protocol
 
-from swarmbox.api import FlightMode, Setpoint, SetpointKind, Telemetry
+from swarmbox.api import FlightMode, Setpoint, SetpointKind, SetpointVerdict, Telemetry
 from swarmbox.hal.safety import SafetyLimits, check_setpoint
 from swarmbox.hal.sim.control import CascadedController
 from swarmbox.hal.sim.params import SimParams
@@ -129,17 +129,18 @@ class SimVehicle:
                                   vmax_up_m_s=self._p.mpc_tko_speed_m_s)
         self._set_mode(FlightMode.TAKEOFF)
 
-    def setpoint(self, sp: Setpoint) -> None:
+    def setpoint(self, sp: Setpoint) -> SetpointVerdict:
         if self._refuse("setpoint"):
-            return
+            return SetpointVerdict("ignored", "disarmed")
         verdict = check_setpoint(sp, self.telemetry(), self._limits)
+        result = SetpointVerdict(verdict.action, verdict.reason, verdict.setpoint)
         if verdict.action != "ok":
             self._fleet.emit(self.drone_id, "safety", "setpoint_" + verdict.action,
                          {"reason": verdict.reason, "kind": sp.kind.name.lower(),
                           "requested": [float(x) for x in sp.ned]})
         sp = verdict.setpoint
         if sp is None or (self.mode is FlightMode.OFFBOARD and sp == self._last_sp):
-            return
+            return result
         ctrl, i = self._ctrl, self.drone_id
         if sp.kind is SetpointKind.POSITION:
             ctrl.set_position(i, sp.ned)
@@ -150,6 +151,7 @@ class SimVehicle:
         ctrl.set_yaw_target(i, sp.yaw_rad)
         self._set_mode(FlightMode.OFFBOARD)
         self._last_sp = sp
+        return result
 
     def land(self) -> None:
         if self._refuse("land"):

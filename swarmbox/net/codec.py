@@ -26,7 +26,7 @@ _HEADER = struct.Struct("<BQdhh")
 _VEC = struct.Struct("<3f")
 _HB = struct.Struct("<bB")
 _REPORT = struct.Struct("<b?HH9fH")
-_TASK = struct.Struct("<I?B4fH")
+_TASK = struct.Struct("<I?BbI4fH")
 _ACK = struct.Struct("<I")
 _COUNT = struct.Struct("<H")
 _DESC = struct.Struct("<hb3f")
@@ -77,8 +77,8 @@ def encode(msg) -> bytes:
     if code == 3:
         data = msg.data.encode()
         yaw = math.nan if msg.yaw_rad is None else msg.yaw_rad
-        return head + _TASK.pack(msg.seq, msg.reliable, msg.code, *_vec(msg.waypoint_ned_m), yaw,
-                                 len(data)) + data
+        return head + _TASK.pack(msg.seq, msg.reliable, msg.code, msg.stage, msg.floor,
+                                 *_vec(msg.waypoint_ned_m), yaw, len(data)) + data
     if code == 4:
         return head + _ACK.pack(msg.seq)
     return head + _COUNT.pack(len(msg.neighbours)) + _descs(msg.neighbours)
@@ -114,12 +114,12 @@ def _decode(buf: bytes):
         return Report(msg_id, t_sent, src, dst, f[0], f[1], f[2], f[3], tuple(f[4:7]), tuple(f[7:10]),
                       _opt(tuple(f[10:13])), data, _undescs(buf, off, rest // _DESC.size))
     if code == 3:
-        seq, reliable, cmd, wn, we, wd, yaw, n = _TASK.unpack_from(buf, off)
+        seq, reliable, cmd, stage, floor, wn, we, wd, yaw, n = _TASK.unpack_from(buf, off)
         off += _TASK.size
         data = buf[off:off + n].decode()
         _exact(buf, off + n)
         return TaskCommand(msg_id, t_sent, src, dst, seq, reliable, cmd, _opt((wn, we, wd)),
-                           None if math.isnan(yaw) else yaw, data)
+                           None if math.isnan(yaw) else yaw, data, stage, floor)
     if code == 4:
         (seq,) = _ACK.unpack_from(buf, off)
         _exact(buf, off + _ACK.size)

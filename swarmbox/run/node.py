@@ -38,6 +38,7 @@ from swarmbox.net.zenoh_medium import ZenohMedium
 from swarmbox.record.schema import node_name
 from swarmbox.record.writer import Recorder
 from swarmbox.run import build, mission, node_faults
+from swarmbox.run.params import typed_params
 from swarmbox.run.runner import write_atomic
 
 
@@ -111,7 +112,7 @@ class NodeProcess:
         inbox = self.medium.register(node_id, self.clock, log.appender("messages"))
         common = dict(time=self.time, clock=self.clock, net=self.medium, inbox=inbox, log=log,
                       timing=self.timing, mission=m.info(),
-                      params=OmegaConf.to_container(cfg.algo.params, resolve=True),
+                      params=typed_params(cfg.algo),
                       rng=build.rng_for(seed, f"algo/{self.name}"))
         self.backend = None
         vehicle = plan.get("vehicles", {}).get(self.name)

@@ -19,6 +19,14 @@ CONF = ROOT / "swarmbox" / "conf"
 register()
 
 
+def pytest_collection_modifyitems(config, items):
+    """Benchmarks (tests/bench) are slow tests: CI runs them with ``-m slow``."""
+    bench = ROOT / "tests" / "bench"
+    for item in items:
+        if bench in Path(item.fspath).parents:
+            item.add_marker(pytest.mark.slow)
+
+
 def compose_config(overrides: list[str] | tuple[str, ...] = ()) -> tuple[DictConfig, dict[str, str]]:
     GlobalHydra.instance().clear()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):

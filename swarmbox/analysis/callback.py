@@ -38,11 +38,12 @@ class AnalyzeSweepCallback(Callback):
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         try:
             from swarmbox.analysis.outputs import write_sweep
+            from swarmbox.analysis.parallel import Reporter
             from swarmbox.analysis.sweep import SweepOptions, analyze_sweep
 
             options = SweepOptions(group_by=self.group_by, n_boot=self.n_boot, seed=self.seed)
             sweep_dir = Path(str(config.hydra.sweep.dir))
-            result = analyze_sweep(sweep_dir, options)
+            result = analyze_sweep(sweep_dir, options, progress=Reporter("sweep analysis"))
             write_sweep(result, sweep_dir, with_figures=self.figures)
             for row in result.problems.itertuples(index=False):
                 log.warning("%s: %s: %s", row.severity, row.run, row.problem)

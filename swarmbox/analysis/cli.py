@@ -19,6 +19,7 @@ from swarmbox.analysis.compare import (
 )
 from swarmbox.analysis.load import RunLoadError, find_runs
 from swarmbox.analysis.outputs import metrics_table, write_run, write_sweep
+from swarmbox.analysis.parallel import Reporter
 from swarmbox.analysis.report import AnalysisOptions, RunAnalysis, analyze_run
 from swarmbox.analysis.sweep import SweepOptions, analyze_sweep, summary_wide
 from swarmbox.analysis.tables import to_markdown
@@ -48,6 +49,7 @@ def _analyze_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--seed", type=int, default=0, help="bootstrap seed (0)")
     sweep.add_argument("--metrics", nargs="+", help="metrics drawn in the sweep figures")
     sweep.add_argument("--per-run", action="store_true", help="also write every run's own tables/figures")
+    sweep.add_argument("--workers", type=int, help="parallel analysis processes (default: one per idle core)")
     return p
 
 
@@ -99,7 +101,7 @@ def _analyze_sweep(path: Path, out: Path, args: argparse.Namespace) -> int:
     opts = SweepOptions(group_by=tuple(args.group_by), statuses=tuple(args.statuses), n_boot=args.n_boot,
                         ci=args.ci, seed=args.seed, pairs=tuple(map(tuple, args.pair)) if args.pair else None,
                         run=_run_options(args))
-    result = analyze_sweep(path, opts)
+    result = analyze_sweep(path, opts, workers=args.workers, progress=Reporter("analysis"))
     write_sweep(result, out, with_figures=not args.no_figures, metrics=args.metrics)
     for row in result.problems.itertuples(index=False):
         print(f"{row.severity}: {row.run}: {row.problem}")

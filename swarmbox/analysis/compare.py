@@ -40,7 +40,8 @@ import yaml
 
 from swarmbox.analysis.catalog import Direction, direction_of
 
-STAT_COLUMNS = {"metric", "n", "mean", "value", "median", "std", "ci_low", "ci_high", "direction", "unit"}
+STAT_COLUMNS = {"metric", "n", "mean", "value", "median", "std", "ci_low", "ci_high", "direction", "unit",
+                "note", "kind"}   # note, kind: the sweep summary's annotations (CI withheld, machine figure)
 REGRESSIONS = {"worse", "changed", "missing", "nan"}
 #: Name of the tolerance file that travels with a baseline.
 BASELINE_TOLERANCES = "tolerances.yaml"

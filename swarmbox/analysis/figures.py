@@ -16,9 +16,11 @@ import seaborn as sns
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
+from swarmbox.analysis.catalog import MACHINE_METRICS, unit_of
 from swarmbox.analysis.unify import T
 
 _GROUND = -1
+MIN_N_BOX = 5     # fewer runs in a group: dots and the mean, no quartile box
 
 
 def _axes(ax: Axes | None, size: tuple[float, float] = (6.0, 5.0)) -> tuple[Figure, Axes]:
@@ -37,49 +39,78 @@ def save(fig: Figure, directory: Path, name: str, formats: tuple[str, ...] = ("p
     return paths
 
 
-def normalized(summary: pd.DataFrame, group_by: tuple[str, ...] = ("algo",),
-               metrics: list[str] | None = None, rel_tol: float = 1e-4) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(score, mean) matrices group x metric; score in [0, 1] per metric with 1 = best.
+def label(metric: str) -> str:
+    """Axis label of a metric: its name (as in the tables) and its unit.
 
-    Min-max scaling per metric, flipped for lower-is-better metrics. Only metrics with a direction
-    are kept. A metric whose group means agree within ``rel_tol`` (relative) scores 0.5 everywhere,
-    so that numerical noise is not painted as a difference.
+    Built-in metrics have their unit in the catalog; a mission metric declared in ``algo.metrics``
+    gets it from its name's unit token (``formation_error_m_mean``: m, ``delivery_wait_s_max``: s).
     """
-    data = summary[summary["direction"].isin(["lower", "higher"])]
+    unit = unit_of(metric) or next((u for u in ("ms", "m", "s") if u in metric.split("_")), "")
+    return f"{metric} [{unit}]" if unit else metric
+
+
+def gaps(summary: pd.DataFrame, group_by: tuple[str, ...] = ("algo",),
+         metrics: list[str] | None = None, rel_tol: float = 1e-4) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(gap, mean) matrices group x metric: how far each group's mean is from the best group's.
+
+    gap = |mean - best mean| / largest |mean| of the metric, in [0, 1]; 0 is the best group (or a
+    tie within ``rel_tol``). Unlike min-max scaling, this stays meaningful with two groups: a 3 %
+    difference reads as 3 %, not as best vs worst. Only algorithm metrics with a direction are kept
+    (never machine figures such as wall time).
+    """
+    data = summary[summary["direction"].isin(["lower", "higher"]) & ~summary["metric"].isin(MACHINE_METRICS)]
     if metrics is not None:
         data = data[data["metric"].isin(metrics)]
     data = data.assign(group=data[list(group_by)].astype("str").agg("/".join, axis=1))
     means = data.pivot(index="group", columns="metric", values="mean").astype("float64")
-    directions = data.drop_duplicates("metric").set_index("metric")["direction"]
-    lo, hi = means.min(), means.max()
+    directions = data.drop_duplicates("metric").set_index("metric")["direction"].reindex(means.columns)
+    best = means.min().where(directions == "lower", means.max())
     scale = np.maximum(means.abs().max(), 1e-12)
-    distinct = (hi - lo) > rel_tol * scale
-    score = (means - lo) / (hi - lo).where(distinct)
-    lower = (directions.reindex(means.columns) == "lower").to_numpy()
-    score.loc[:, lower] = 1 - score.loc[:, lower]
-    score.loc[:, ~distinct.to_numpy()] = 0.5
-    score = score.where(means.notna())
+    gap = (means - best).abs() / scale
+    gap = gap.where(gap > rel_tol, 0.0).where(means.notna())
+    gap = gap.loc[:, means.notna().sum() >= 2]     # a metric only one group has: nothing to compare
+    means = means[gap.columns]
     order = [m for m in dict.fromkeys(data["metric"]) if m in means.columns]
-    return score[order], means[order]
+    return gap[order], means[order]
 
 
 def heatmap(summary: pd.DataFrame, *, group_by: tuple[str, ...] = ("algo",), metrics: list[str] | None = None,
             ax: Axes | None = None) -> Figure:
-    """Normalized metric heatmap across groups (paper Fig. 4, left): darker = better, values annotated."""
-    score, means = normalized(summary, group_by, metrics)
-    fig, ax = _axes(ax, (2.0 + 0.9 * max(len(score.columns), 1), 2.5 + 0.5 * max(len(score), 1)))
-    labels = means.map(lambda v: "" if pd.isna(v) else f"{v:.3g}")
-    sns.heatmap(score.astype("float64"), ax=ax, cmap="Greens", vmin=0, vmax=1, annot=labels.to_numpy(),
-                fmt="", cbar_kws={"label": "1 = best"}, linewidths=0.5)
-    ax.set_xlabel("")
-    ax.set_ylabel("/".join(group_by))
-    ax.tick_params(axis="x", labelrotation=60)
-    ax.tick_params(axis="y", labelrotation=0)
+    """Group x metric: each cell shows the group's mean; colour = gap to the best group (white = best).
+
+    Metrics run down the rows (names stay readable), groups across the columns. The colour scale
+    runs from 0 to the largest gap (at least 10 %), so small differences are not painted as large.
+    """
+    gap, means = gaps(summary, group_by, metrics)
+    gap, means = gap.T, means.T
+    fig, ax = _axes(ax, (3.5 + 1.3 * max(len(gap.columns), 1), 1.5 + 0.45 * max(len(gap), 1)))
+    if gap.empty:
+        ax.text(0.5, 0.5, "no metric with a direction in two or more groups: nothing to compare",
+                ha="center", va="center", wrap=True)
+        ax.set_axis_off()
+        return fig
+    cells = means.map(lambda v: "" if pd.isna(v) else f"{v:.3g}")
+    vmax = float(np.clip(np.nanmax(gap.to_numpy(dtype="float64"), initial=0.0), 0.1, 1.0))
+    sns.heatmap(100 * gap.astype("float64"), ax=ax, cmap="OrRd", vmin=0, vmax=100 * vmax,
+                annot=cells.to_numpy(), fmt="", linewidths=0.5, linecolor="white",
+                cbar_kws={"label": "gap to the best group (% of the largest mean)"})
+    ax.set_yticks(np.arange(len(gap)) + 0.5, [label(m) for m in gap.index], rotation=0)
+    ax.set_xlabel("/".join(group_by))
+    ax.set_ylabel("")
+    ax.tick_params(axis="x", labelrotation=30)
+    n = summary.groupby(list(group_by))["n"].max()
+    ax.set_title(f"Mean per {'/'.join(group_by)} (runs per group: {_n_range(n)}); white = best")
     return fig
 
 
+def _n_range(n: pd.Series) -> str:
+    lo, hi = int(n.min()), int(n.max())
+    return f"{lo}" if lo == hi else f"{lo}-{hi}"
+
+
 def boxplot(runs: pd.DataFrame, *, metric: str, by: str = "algo", ax: Axes | None = None) -> Figure:
-    """Distribution of one metric across seeds, one box per group, mean as a triangle, runs as dots
+    """One metric across seeds, one column per group: every run as a dot, the mean as a bar; a box
+    (quartiles) only from 5 runs up, since quartiles of 2-4 points are not a distribution
     (paper Fig. 4, right)."""
     fig, ax = _axes(ax, (4.0, 4.0))
     data = runs[[by, metric]].replace([np.inf, -np.inf], np.nan).dropna()
@@ -87,42 +118,65 @@ def boxplot(runs: pd.DataFrame, *, metric: str, by: str = "algo", ax: Axes | Non
     order = sorted(labels.unique())
     groups = [data.loc[labels == g, metric].to_numpy(dtype="float64") for g in order]
     positions = list(range(len(order)))
-    if groups:
-        ax.boxplot(groups, positions=positions, showmeans=True, widths=0.6, patch_artist=True,
-                   boxprops={"facecolor": "#9ecae1"}, medianprops={"color": "black"})
-        for x, values in zip(positions, groups, strict=True):
-            ax.scatter(np.full(values.size, x), values, s=9, color="black", zorder=3)
-    ax.set_xticks(positions, order)
+    boxed = [(x, v) for x, v in zip(positions, groups, strict=True) if v.size >= MIN_N_BOX]
+    if boxed:
+        ax.boxplot([v for _, v in boxed], positions=[x for x, _ in boxed], widths=0.6, patch_artist=True,
+                   boxprops={"facecolor": "#9ecae1"}, medianprops={"color": "black"}, showfliers=False)
+    for x, values in zip(positions, groups, strict=True):
+        jitter = np.linspace(-0.12, 0.12, values.size) if values.size > 1 else np.zeros(1)
+        ax.scatter(x + jitter[: values.size], values, s=12, color="black", zorder=3,
+                   label="one run" if x == 0 else None)
+        if values.size:
+            ax.hlines(values.mean(), x - 0.3, x + 0.3, color="#d62728", lw=2, zorder=4,
+                      label="mean" if x == 0 else None)
+    ax.set_xticks(positions, [f"{g}\n(n={v.size})" for g, v in zip(order, groups, strict=True)])
     ax.ticklabel_format(axis="y", useOffset=False)
-    ax.set_title(metric)
+    ax.set_ylabel(label(metric))
+    ax.set_title(metric, fontsize="medium")
     return fig
 
 
 def boxplots(runs: pd.DataFrame, *, metrics: list[str], by: str = "algo", ax: Axes | None = None) -> Figure:
-    """A grid of :func:`boxplot` s, one per metric (``ax`` is ignored: the grid needs its own figure)."""
-    cols = min(4, max(len(metrics), 1))
-    rows = int(np.ceil(len(metrics) / cols)) or 1
-    fig = Figure(figsize=(3.5 * cols, 3.2 * rows), layout="constrained")
+    """A grid of :func:`boxplot` s, one per metric that varies (``ax`` is ignored: the grid needs its
+    own figure). Metrics with the same value in every run get no panel; a footnote lists them."""
+    varying, constant = [], []
+    for m in metrics:
+        values = runs[m].replace([np.inf, -np.inf], np.nan).dropna()
+        (varying if values.nunique() > 1 else constant).append(m)
+    cols = min(4, max(len(varying), 1))
+    rows = int(np.ceil(len(varying) / cols)) or 1
+    fig = Figure(figsize=(3.8 * cols, 3.4 * rows + 0.6), layout="constrained")
     axes = fig.subplots(rows, cols, squeeze=False).ravel()
-    for metric, axis in zip(metrics, axes, strict=False):
+    for metric, axis in zip(varying, axes, strict=False):
         boxplot(runs, metric=metric, by=by, ax=axis)
-    for axis in axes[len(metrics):]:
+    for axis in axes[len(varying):]:
         axis.set_visible(False)
+    if varying:
+        axes[0].legend(loc="best", fontsize="x-small")
+    title = f"Per-run values by {by} (box: quartiles, from {MIN_N_BOX} runs up)"
+    if constant:
+        same = ", ".join(f"{m} = {runs[m].dropna().iloc[0]:.3g}" if runs[m].notna().any() else f"{m}: no data"
+                         for m in constant)
+        title += f"\nthe same in every run, not drawn: {same}"
+    fig.suptitle(title)
     return fig
 
 
-def _track(rows: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+def _track(rows: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, str]:
+    """(east, north, source): true positions where the backend logged them, else the estimate."""
     true = rows[["true_n", "true_e"]].to_numpy(dtype="float64")
     if len(true) and np.isfinite(true).all():
-        return true[:, 1], true[:, 0]
-    return rows["pos_e"].to_numpy(dtype="float64"), rows["pos_n"].to_numpy(dtype="float64")
+        return true[:, 1], true[:, 0], "true"
+    return rows["pos_e"].to_numpy(dtype="float64"), rows["pos_n"].to_numpy(dtype="float64"), "estimated"
 
 
 def trajectories(state: pd.DataFrame, *, ax: Axes | None = None) -> Figure:
     """Every drone's horizontal path (x = East, y = North, equal axes), start marked with its id."""
     fig, ax = _axes(ax)
+    sources = set()
     for drone, rows in state.sort_values(T).groupby("node", sort=True):
-        east, north = _track(rows)
+        east, north, source = _track(rows)
+        sources.add(source)
         (line,) = ax.plot(east, north, lw=1.2, label=f"drone {drone}")
         if len(east):
             ax.scatter([east[0]], [north[0]], marker="o", color=line.get_color(), zorder=3)
@@ -131,6 +185,8 @@ def trajectories(state: pd.DataFrame, *, ax: Axes | None = None) -> Figure:
     ax.set_ylabel("North (m)")
     ax.set_aspect("equal", adjustable="datalim")
     ax.legend(loc="best", fontsize="small")
+    what = " and ".join(sorted(sources)) or "no"
+    ax.set_title(f"Horizontal paths ({what} positions; dot = start)")
     return fig
 
 
@@ -146,10 +202,22 @@ def timeline(frame: pd.DataFrame, *, metric: str, onset: float | None = None, de
         ax.axvline(onset, color="red", ls="--", label="fault onset")
     if detection is not None:
         ax.axvline(detection, color="black", ls=":", label="first anomaly")
-    ax.set_xlabel("unified time (s)")
-    ax.set_ylabel(metric)
+    name, unit = TIMELINE_LABELS.get(metric, (metric, ""))
+    ax.set_xlabel("unified time [s] (ground clock)")
+    ax.set_ylabel(f"{name} [{unit}]" if unit else name)
+    ax.set_title(f"{name[0].upper()}{name[1:]} per drone")
     ax.legend(loc="best", fontsize="small")
     return fig
+
+
+#: Timeline metrics (:data:`swarmbox.analysis.timeline.MONITORED`): readable name and unit.
+TIMELINE_LABELS = {
+    "latency_ms": ("one-way latency of delivered messages", "ms"),
+    "loss_ratio": ("share of messages lost", "0-1"),
+    "disc_n_m": ("GNSS - estimate, north", "m"),
+    "disc_e_m": ("GNSS - estimate, east", "m"),
+    "disc_d_m": ("GNSS - estimate, down", "m"),
+}
 
 
 def _layout(nodes: list[int]) -> dict[int, tuple[float, float]]:
@@ -168,8 +236,9 @@ def comm_graph(links: pd.DataFrame, *, ax: Axes | None = None) -> Figure:
     lat = links.set_index(["src", "dst"])
     pairs = sorted({(min(a, b), max(a, b)) for a, b in zip(links["src"], links["dst"], strict=True)})
     finite = links["latency_ms_mean"].dropna()
-    vmax = float(finite.max()) if len(finite) else 1.0
+    vmax = max(float(finite.max()), 1e-3) if len(finite) else 1.0
     cmap = matplotlib.colormaps["viridis"]
+    norm = matplotlib.colors.Normalize(vmin=0.0, vmax=vmax)
     for a, b in pairs:
         parts, values = [], []
         for s, d in ((a, b), (b, a)):
@@ -179,7 +248,7 @@ def comm_graph(links: pd.DataFrame, *, ax: Axes | None = None) -> Figure:
                 parts.append(f"{_name(s)}>{_name(d)} {row['latency_ms_mean']:.1f} ms {loss_pct:.0f}%")
                 values.append(row["latency_ms_mean"])
         mean = float(np.nanmean(values)) if np.isfinite(values).any() else np.nan
-        colour = cmap(mean / vmax) if np.isfinite(mean) and vmax > 0 else "grey"
+        colour = cmap(norm(mean)) if np.isfinite(mean) else "grey"
         (xa, ya), (xb, yb) = pos[a], pos[b]
         ax.plot([xa, xb], [ya, yb], color=colour, lw=2)
         ax.text((xa + xb) / 2, (ya + yb) / 2, "\n".join(parts), fontsize=6, ha="center", va="center",
@@ -188,7 +257,10 @@ def comm_graph(links: pd.DataFrame, *, ax: Axes | None = None) -> Figure:
         ax.scatter([x], [y], s=400, color="#fdae6b" if node == _GROUND else "#9ecae1", zorder=3)
         ax.text(x, y, _name(node), ha="center", va="center", fontsize=8, zorder=4)
     ax.set_axis_off()
-    ax.set_title("communication graph (colour: mean latency)")
+    ax.set_aspect("equal")
+    fig.colorbar(matplotlib.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.7,
+                 label="mean one-way latency of the link [ms] (grey: no delivery)")
+    ax.set_title("Communication graph (labels: latency and loss each way)")
     return fig
 
 

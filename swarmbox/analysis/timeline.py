@@ -1,7 +1,10 @@
 """Per-drone metrics per time window: the series the anomaly detector and the timeline figures read.
 
 Windows tile the unified clock: window k is [k*w, (k+1)*w) and is stamped with its end, (k+1)*w, the
-first moment its value is known. Monitored metrics, per drone and window:
+first moment its value is known. Samples are stamped on ticks and the estimated clock offsets are off by
+microseconds, so a sample up to half a tick (12.5 ms) before a window's start counts in that window:
+without that tolerance a tick sample landing a microsecond early would fall into the previous window.
+Monitored metrics, per drone and window:
 
 - ``latency_ms``: mean latency of the delivered messages the drone sent or that were sent to it,
   binned by send time;
@@ -23,8 +26,12 @@ MONITORED = ("latency_ms", "loss_ratio", "disc_n_m", "disc_e_m", "disc_d_m")
 COLUMNS = [T, "drone", "metric", "value"]
 
 
+TOLERANCE_S = 0.0125
+
+
 def _stamp(t: pd.Series, window_s: float) -> np.ndarray:
-    return (np.floor(t.to_numpy(dtype="float64") / window_s) + 1) * window_s
+    tol = min(TOLERANCE_S, window_s / 2)
+    return (np.floor((t.to_numpy(dtype="float64") + tol) / window_s) + 1) * window_s
 
 
 def network_timeline(flow: pd.DataFrame, drones: list[int], window_s: float) -> pd.DataFrame:

@@ -21,7 +21,7 @@ from swarmbox.api import (
     Telemetry,
 )
 from swarmbox.core.delivery import Window
-from swarmbox.core.messages import Heartbeat, ProxAlert, Report, TaskAck, TaskCommand
+from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck, TaskCommand
 from swarmbox.core.node import STAGE_OF, Node, call_hook
 from swarmbox.core.stages import TERMINAL, Stage, path_to
 
@@ -138,7 +138,11 @@ class AgentNode(Node):
         if commanded == self.stage or self.stage in TERMINAL:
             return
         if commanded is Stage.ABORT:
-            self.enter(Stage.ABORT, "superior aborted")
+            if self.superior != GROUND_ID:   # a drone superior lost its vehicle or hit a failsafe
+                self.event("topology", "superior_aborted", self.node_id, superior=self.superior)
+                self._hand_over("aborted")
+            else:
+                self.enter(Stage.ABORT, "superior aborted")
         elif commanded > self.stage:
             for stage in path_to(self.stage, commanded):
                 self.enter(stage)
@@ -194,8 +198,12 @@ class AgentNode(Node):
         if not self._heard_superior:
             return
         self._sup_silent += 1
-        if self._sup_silent <= self.timing.lost_superior_ticks:
-            return
+        if self._sup_silent > self.timing.lost_superior_ticks:
+            self._hand_over("silent")
+
+    def _hand_over(self, why: str) -> None:
+        """The superior is gone (``silent``) or out of the mission (``aborted``): follow the next of
+        its successors, or abort when none is left."""
         lost = self.superior
         self._abandoned.add(lost)
         options = [s for s in self._successor_list if s != self.node_id and s not in self._abandoned]
@@ -206,9 +214,17 @@ class AgentNode(Node):
             self._sup_silent = 0
             self.event("topology", "handover", self.node_id, lost=lost, new=self.superior)
             return
-        self.event("failsafe", "superior_lost", self.node_id, superior=lost,
-                   action="return_to_launch")
+        if why == "aborted":   # every successor is out too (the whole mission aborts): land
+            self.enter(Stage.ABORT, "superior aborted")
+            return
+        self.event("failsafe", "superior_lost", self.node_id, superior=lost, action="return_to_launch")
         self.enter(Stage.ABORT, f"lost superior {lost} with no successor left", failsafe=True)
+
+    def vehicle_failed(self, reason: str) -> None:
+        """The autopilot refused a flight command to the end of its retries: this drone aborts."""
+        if self.stage not in TERMINAL:
+            self.event("failsafe", "vehicle_failed", self.node_id, reason=reason, action="land")
+            self.enter(Stage.ABORT, reason)
 
     # -- outgoing -------------------------------------------------------------------------------
     def _publish(self, tel: Telemetry) -> None:

@@ -92,6 +92,8 @@ class Swarm:
                 agent = self._by_id[ev.drone_id]
                 log((agent.clock.now(), t.tick, ev.kind, ev.name, ev.drone_id,
                      json.dumps(ev.data, sort_keys=True, default=str)))
+                if ev.kind == "failure":   # the autopilot cannot fly the mission: the drone aborts
+                    agent.vehicle_failed(str(ev.data.get("reason", ev.name)))
         t.tick += 1
         t.t_s = t.tick * self.tick_s
 

@@ -122,6 +122,7 @@ class RunConfig:
     speed: float = 1.0              # real-time backends: wall-clock pacing factor (SITL speed-up)
     progress: bool = True           # progress lines on stderr for long runs
     out_dir: Optional[str] = None   # default: Hydra's output directory
+    resume: bool = False            # skip a run whose directory holds a finished run (ok/aborted)
     runtime: str = "single"         # single: one process | processes: ground + one process per agent
     net: NetConfig = field(default_factory=NetConfig)
 

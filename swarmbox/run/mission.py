@@ -106,7 +106,9 @@ def load(cfg: DictConfig, rng: np.random.Generator | None = None) -> Mission:
     else:
         mission = from_parts(m.name, _mapping(m, "initial_positions"), _mapping(m, "superiors"),
                              _mapping(m, "values"), m.swarm_size, obstacles, m.max_sim_time_s, "mission")
-    if m.generator is not None:
+    # A mission file's own values (e.g. its packages) win over the group's generator: the generator
+    # fills values only when the file has none.
+    if m.generator is not None and not (m.file and mission.values):
         mission = replace(mission, values=generate_values(m.generator, rng or np.random.default_rng(0)))
     return mission
 

@@ -12,8 +12,6 @@ import json
 import os
 import platform
 import subprocess
-import sys
-import time
 import traceback
 from collections.abc import Callable
 from datetime import UTC, datetime
@@ -31,6 +29,7 @@ from swarmbox.record.schema import SCHEMA_VERSION, node_name
 from swarmbox.record.writer import Recorder
 from swarmbox.run import build, mission
 from swarmbox.run.config import GROUPS
+from swarmbox.run.progress import RunProgress
 
 _PROJECT_ROOT = Path(__file__).resolve().parents[2]
 
@@ -62,20 +61,6 @@ def _git_sha() -> str | None:
     except (OSError, subprocess.SubprocessError):
         return None
     return out.stdout.strip() or None
-
-
-def _progress(label: str):
-    last = [time.perf_counter()]
-
-    def report(swarm: Swarm) -> None:
-        now = time.perf_counter()
-        if now - last[0] >= 2.0:
-            last[0] = now
-            g = swarm.ground
-            _, alive = g.head_count()
-            print(f"[{label}] t={swarm.time.t_s:7.1f} s  ground {g.stage.name:<11}  "
-                  f"{alive}/{g.mission.swarm_size} drones alive", file=sys.stderr, flush=True)
-    return report
 
 
 def run_choices(cfg: DictConfig, hydra_choices: Any) -> dict[str, str]:
@@ -116,17 +101,19 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         "started_at": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     recorder = Recorder(run_dir)
-    swarm = None
+    swarm = progress = None
     try:
         m = mission.load(cfg, build.rng_for(int(cfg.seed), "dataset"))
         manifest["n_drones"] = m.swarm_size
+        if cfg.mission.file:   # record the file's own mission, not the group it was loaded over
+            manifest["choices"] = choices = {**choices, "mission": m.name}
         manifest["nodes"] = [node_name(i) for i in [GROUND_ID, *m.drone_ids]]
         manifest["clocks"] = build.clock_settings(cfg)
         swarm = build.build_swarm(cfg, m, recorder)
         if prepare is not None:
             prepare(swarm)
         label = f"{choices.get('algo', '?')} seed={cfg.seed}"
-        progress = _progress(label) if cfg.run.progress else None
+        progress = RunProgress(label, m.max_sim_time_s) if cfg.run.progress else None
 
         def tick_hook(s: Swarm) -> None:
             recorder.maybe_flush()
@@ -143,6 +130,8 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         if swarm is not None:
             manifest.update(sim_time_s=swarm.time.t_s, ticks=swarm.time.tick)
     finally:
+        if progress is not None:
+            progress.close()
         try:
             if swarm is not None:
                 swarm.backend.close()

@@ -218,6 +218,7 @@ def small_sweep(tmp_path_factory) -> dict[tuple[str, int], tuple[dict, Path]]:
     return out
 
 
+@pytest.mark.slow   # flies the nine algorithms x seeds (module fixture)
 @pytest.mark.parametrize("algo", ALGOS)
 def test_every_package_is_delivered_exactly_once(small_sweep, algo):
     for seed in SEEDS:
@@ -234,6 +235,7 @@ def test_every_package_is_delivered_exactly_once(small_sweep, algo):
         assert stages[-2:] == ["LANDING", "TERMINATION"]
 
 
+@pytest.mark.slow   # flies the nine algorithms x seeds (module fixture)
 @pytest.mark.parametrize("algo", ALGOS)
 def test_drones_fly_their_packages_in_the_sorted_assigned_order(small_sweep, algo):
     _, sort, assign = algo.split("_")
@@ -267,6 +269,7 @@ def paper_like_points(run_dir: Path) -> dict[int, tuple[float, float]]:
     return out
 
 
+@pytest.mark.slow   # flies the nine algorithms x seeds (module fixture)
 def test_each_drone_completes_once_back_home_after_its_last_delivery(small_sweep):
     _, d = small_sweep[("delivery_distance_block", 0)]
     for drone in range(5):
@@ -276,6 +279,7 @@ def test_each_drone_completes_once_back_home_after_its_last_delivery(small_sweep
         assert len(done) == 1 and done["t_s"].iloc[0] == pytest.approx(last_return)
 
 
+@pytest.mark.slow   # flies the nine algorithms x seeds (module fixture)
 def test_cruise_altitudes_separate_the_drones(small_sweep):
     _, d = small_sweep[("delivery_none_rr", 0)]
     for drone in range(5):
@@ -284,6 +288,7 @@ def test_cruise_altitudes_separate_the_drones(small_sweep):
         assert cruise["true_d"].median() == pytest.approx(-10.0 - 2.0 * drone, abs=0.3)
 
 
+@pytest.mark.slow   # flies the nine algorithms x seeds (module fixture)
 def test_distance_sort_shortens_the_average_wait_of_dynamic_assignment(small_sweep):
     """Shortest trips first lowers the mean delivery wait (shortest-processing-time rule)."""
     for seed in SEEDS:
@@ -292,6 +297,7 @@ def test_distance_sort_shortens_the_average_wait_of_dynamic_assignment(small_swe
         assert waits["delivery_distance_dynamic"] < 0.95 * waits["delivery_none_dynamic"]
 
 
+@pytest.mark.slow   # flies the nine algorithms x seeds (module fixture)
 def test_same_seed_same_logs_other_seed_other_dataset(small_sweep, tmp_path):
     manifest, again = run_config(tmp_path / "again", ["algo=delivery_azimuth_dynamic", "seed=1", *SMALL]), \
         tmp_path / "again"

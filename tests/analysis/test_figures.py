@@ -28,6 +28,7 @@ def test_trajectory_plot_has_one_line_per_drone(analysis):
     assert east[0] == pytest.approx(15.0) and north.max() == pytest.approx(60.0)   # x = East, y = North
     assert [t.get_text() for t in ax.texts] == ["0", "1", "2", "3"]                # start labels
     assert ax.get_aspect() == 1.0
+    assert "true positions" in ax.get_title()                                     # which positions
 
 
 def test_trajectories_on_a_given_axes(analysis):
@@ -44,12 +45,14 @@ def test_timeline_marks_onset_and_detection(analysis):
     assert labels == ["drone 0", "drone 1", "drone 2 (target)", "drone 3", "fault onset", "first anomaly"]
     onset_line = fig.axes[0].get_lines()[4]
     assert onset_line.get_xdata()[0] == pytest.approx(5.0)
+    assert fig.axes[0].get_ylabel() == "GNSS - estimate, north [m]" and fig.axes[0].get_title()
 
 
 def test_comm_graph_labels_every_link(analysis):
     fig = figures.comm_graph(analysis.links)
     texts = [t.get_text() for t in fig.axes[0].texts]
     assert sum("G>d" in t for t in texts) == 4 and "G" in texts
+    assert "latency" in fig.axes[1].get_ylabel()                    # the promised colour scale
 
 
 SUMMARY = pd.DataFrame({
@@ -60,31 +63,52 @@ SUMMARY = pd.DataFrame({
 })
 
 
-def test_normalization_makes_better_darker():
-    score, means = figures.normalized(SUMMARY)
-    assert score["mission_duration_s"].to_dict() == pytest.approx({"a": 1.0, "b": 0.0, "c": 0.5})
-    assert score["utilization_mean"].to_dict() == pytest.approx({"a": 0.0, "b": 1.0, "c": 0.5})
+def test_gap_to_the_best_group():
+    gap, means = figures.gaps(SUMMARY)
+    assert gap["mission_duration_s"].to_dict() == pytest.approx({"a": 0.0, "b": 0.5, "c": 0.25})
+    assert gap["utilization_mean"].to_dict() == pytest.approx({"a": 4 / 6, "b": 0.0, "c": 2 / 6})
     assert means.loc["b", "mission_duration_s"] == 20.0
 
 
-def test_noise_level_differences_are_ties():
+def test_two_groups_keep_the_size_of_their_difference():
+    two = pd.DataFrame({"algo": ["a", "b"], "metric": ["mission_duration_s"] * 2, "mean": [100.0, 103.0],
+                        "direction": ["lower"] * 2, "n": [5, 5]})
+    gap, _ = figures.gaps(two)
+    assert gap["mission_duration_s"].to_dict() == pytest.approx({"a": 0.0, "b": 3 / 103})   # not 0 vs 1
+
+
+def test_noise_level_differences_are_ties_and_machine_figures_are_left_out():
     summary = SUMMARY.assign(mean=[10.0, 10.0 + 1e-9, 10.0, 0.2, 0.6, 0.4])
-    score, _ = figures.normalized(summary)
-    assert score["mission_duration_s"].tolist() == [0.5, 0.5, 0.5]
+    machine = pd.DataFrame({"algo": ["a", "b"], "metric": ["real_time_factor"] * 2, "mean": [50.0, 90.0],
+                            "direction": ["higher"] * 2})
+    gap, _ = figures.gaps(pd.concat([summary, machine]))
+    assert gap["mission_duration_s"].tolist() == [0.0, 0.0, 0.0]
+    assert "real_time_factor" not in gap.columns
 
 
-def test_heatmap_cells_and_annotations():
-    fig = figures.heatmap(SUMMARY)
+def test_heatmap_cells_annotations_title_and_colour_scale():
+    fig = figures.heatmap(SUMMARY.assign(n=5))
     ax = fig.axes[0]
-    assert [t.get_text() for t in ax.get_xticklabels()] == ["mission_duration_s", "utilization_mean"]
+    assert [t.get_text() for t in ax.get_yticklabels()] == ["mission_duration_s [s]", "utilization_mean"]
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["a", "b", "c"]
     assert "20" in [t.get_text() for t in ax.texts]
-    assert ax.collections[0].get_array().reshape(3, 2)[0].tolist() == pytest.approx([1.0, 0.0])
+    assert ax.collections[0].get_array().reshape(2, 3)[0].tolist() == pytest.approx([0.0, 50.0, 25.0])
+    assert "best" in ax.get_title() and "5" in ax.get_title()
+    assert "gap to the best" in fig.axes[1].get_ylabel()           # the colour bar says what colour means
 
 
-def test_boxplots_one_panel_per_metric():
+def test_boxplots_one_panel_per_varying_metric_with_units():
     runs = pd.DataFrame({"algo": ["a"] * 3 + ["b"] * 3, "m1": [1, 2, 3, 4, 5, 6.0],
-                         "m2": [0, 0, 1, 1, 2, 2.0]})
-    fig = figures.boxplots(runs, metrics=["m1", "m2"])
+                         "mission_duration_s": [0, 0, 1, 1, 2, 2.0], "collision_events": [0.0] * 6})
+    fig = figures.boxplots(runs, metrics=["m1", "mission_duration_s", "collision_events"])
     visible = [ax for ax in fig.axes if ax.get_visible()]
-    assert [ax.get_title() for ax in visible] == ["m1", "m2"]
-    assert [t.get_text() for t in visible[0].get_xticklabels()] == ["a", "b"]
+    assert [ax.get_title() for ax in visible] == ["m1", "mission_duration_s"]
+    assert visible[1].get_ylabel() == "mission_duration_s [s]"
+    assert [t.get_text() for t in visible[0].get_xticklabels()] == ["a\n(n=3)", "b\n(n=3)"]
+    assert not visible[0].patches                                    # n = 3: no quartile box
+    assert "collision_events = 0" in fig.get_suptitle()
+
+
+def test_heatmap_with_a_single_group_says_there_is_nothing_to_compare():
+    fig = figures.heatmap(SUMMARY[SUMMARY["algo"] == "a"].assign(n=5))
+    assert "nothing to compare" in fig.axes[0].texts[0].get_text()

@@ -32,6 +32,7 @@ def test_composition_shared_shortcuts_and_per_model_keys():
     assert {tuple(m["targets"]) for m in models.values()} == {(2,)}
 
 
+@pytest.mark.slow
 def test_every_model_has_a_config_file_and_the_schema_covers_every_parameter():
     fields = {f.name for f in dataclasses.fields(FaultConfig)}
     for name, cls in MODELS.items():

@@ -3,6 +3,8 @@
 import json
 import math
 
+import pytest
+
 from swarmbox.core.stages import Stage
 from tests.conftest import table
 
@@ -52,6 +54,7 @@ def test_leader_crash_followers_hand_over_and_the_mission_continues(run):
     _check_followers_carry_on(*_leader_crash(run))
 
 
+@pytest.mark.slow
 def test_ground_link_cut_drones_return_home_and_land(run):
     manifest, d = run("fault=link_cut", "fault.targets=[-1]", "fault.onset_s=40")
     assert manifest["status"] == "aborted"
@@ -68,6 +71,7 @@ def test_ground_link_cut_drones_return_home_and_land(run):
         assert table(d, f"drone_{i}", "stages")["stage"].iloc[-1] == Stage.ABORT
 
 
+@pytest.mark.slow
 def test_follower_crash_ground_continues_with_the_alive_drones(run):
     manifest, d = run("fault=crash", "fault.targets=[3]", "fault.onset_s=40")
     assert manifest["status"] == "ok" and "lost drones [3]" in manifest["reason"]
@@ -75,6 +79,7 @@ def test_follower_crash_ground_continues_with_the_alive_drones(run):
         assert stage_names(d, node)[-1] == "TERMINATION", node
 
 
+@pytest.mark.slow
 def test_battery_failsafe_ground_continues_with_the_others(run):
     manifest, d = run("fault=battery_failsafe", "fault.targets=[2]", "fault.onset_s=40",
                       "mission.max_sim_time_s=150")

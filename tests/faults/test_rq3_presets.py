@@ -2,7 +2,8 @@
 
 import pytest
 
-from swarmbox.analysis import faults as rq3
+from swarmbox.analysis import detection
+from swarmbox.analysis.diagnosis import DiagnosisOptions
 from swarmbox.faults import selected
 from tests.conftest import compose_config
 
@@ -27,11 +28,13 @@ def test_preset_composes_the_rq3_set_up(kind, model):
     (["+experiment=rq3_drift", "fault.rate_m_s=4.0", "fault.targets=8"], "gps_drift"),
     (["+experiment=rq3_loss", "fault.loss_prob=0.3", "fault.targets=3"], "packet_loss"),
 ])
+@pytest.mark.slow
 def test_one_rq3_run_is_diagnosed_on_its_target(run, overrides, fault):
     manifest, d = run(*overrides)
     assert manifest["status"] == "ok", manifest["reason"]
-    rows = rq3.diagnose_run(d).rows.set_index("detector")
-    assert rows.loc["swarmbox", "detected"] and rows.loc["swarmbox", "is_target"]
+    rows = detection.evaluate_run(d, [DiagnosisOptions()]).set_index("detector")
+    assert rows.loc["swarmbox", "detected"] and rows.loc["swarmbox", "localized"]
+    assert rows.loc["swarmbox", "false_alarms"] == 0
     if fault == "gps_drift":
         base = rows.loc["baseline"]
         assert base["detected"] and rows.loc["swarmbox", "t_f_s"] < base["t_f_s"]

@@ -18,8 +18,10 @@ from swarmbox.hal.mavlink.frames import GeoFrame
 from swarmbox.hal.mavsim.process import VEHICLE_LIMITS, ports_of
 from swarmbox.hal.mavsim.commander import Commander
 from swarmbox.hal.sim.backend import SimBackend
+from tests import realtime
 
 ROOT = Path(__file__).resolve().parents[2]
+VEHICLE_SPEED = realtime.speed(4.0)   # the vehicle process's pace: 4 on a free machine
 DT = 0.01
 HOME_ALT = 488.0
 
@@ -165,7 +167,7 @@ class Gcs:
 def vehicle():
     gcs = Gcs()
     cmd = [sys.executable, "-m", "swarmbox.hal.mavsim.process", "--instance", "2", "--home-n", "10", "--home-e", "-5",
-           "--port-plan", f"{gcs.port}:0", "--speed", "4", "--max-wall-s", "60"]
+           "--port-plan", f"{gcs.port}:0", "--speed", str(VEHICLE_SPEED), "--max-wall-s", "60"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         yield gcs
@@ -176,9 +178,10 @@ def vehicle():
         assert proc.returncode == 0, err.decode()
 
 
+@pytest.mark.slow
 def test_vehicle_speaks_px4(vehicle):
     gcs = vehicle
-    first = gcs.collect(2.0)
+    first = gcs.collect(2.0 * 4 / VEHICLE_SPEED)      # 2 s at speed 4: the same simulated time
     assert first, "no traffic from mavsim"
     assert {p.system_id for p, _ in first} == {3} and {p.component_id for p, _ in first} == {1}
     hb = [v for _, v in first if isinstance(v, mc.HeartbeatMsg)]
@@ -189,7 +192,7 @@ def test_vehicle_speaks_px4(vehicle):
     assert frame.ned_of(glob.lat_deg, glob.lon_deg, glob.alt_m) == pytest.approx((10.0, -5.0, 0.0), abs=0.3)
     assert {p.msg_id for p, _ in first} >= {mc.MSG["LOCAL_POSITION_NED"], mc.MSG["EXTENDED_SYS_STATE"]}
 
-    # message intervals are honoured (rates in simulation time: speed 4)
+    # message intervals are honoured (rates in simulation time: 5 Hz x speed x 1.5 s wall)
     att, lpn = mc.MSG["ATTITUDE"], mc.MSG["LOCAL_POSITION_NED"]
     acks = gcs.command(3, mc.CMD_SET_MESSAGE_INTERVAL, att, -1)
     acks += gcs.command(3, mc.CMD_SET_MESSAGE_INTERVAL, lpn, 1e6 / 5)
@@ -197,7 +200,8 @@ def test_vehicle_speaks_px4(vehicle):
     gcs.dec.skipped_ids.clear()
     window = gcs.collect(1.5)
     counts = {m: sum(1 for p, _ in window if p.msg_id == m) for m in (att, lpn)}
-    assert counts[att] == 0 and 22 <= counts[lpn] <= 38, counts     # 5 Hz x 4 x 1.5 s = 30
+    expected = 5 * VEHICLE_SPEED * 1.5
+    assert counts[att] == 0 and 0.7 * expected <= counts[lpn] <= 1.3 * expected, counts
     assert gcs.command(3, mc.CMD_SET_MESSAGE_INTERVAL, 9999, -1)[0].result == mc.RESULT_UNSUPPORTED
 
     # refusals are NACKs; commands for another system get no answer; garbage is survived

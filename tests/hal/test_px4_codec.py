@@ -134,8 +134,10 @@ class Wire:
         self.sent: list[tuple[int, tuple[float, ...], int]] = []
         self.reports: list[tuple[str, dict]] = []
         self.accepted: list[str] = []
+        self.failures: list[tuple[str, str]] = []
         self.t = CommandTracker(lambda c, p, k: self.sent.append((c, p, k)) or True,
-                                lambda n, d: self.reports.append((n, d)), timeout_s, retries)
+                                lambda n, d: self.reports.append((n, d)), timeout_s, retries,
+                                on_failed=lambda cmd, result: self.failures.append((cmd.name, result)))
 
     def cmd(self, command: int, *params: float, name: str = "", quiet: bool = False) -> Command:
         return Command(command, params, quiet, lambda: self.accepted.append(name))
@@ -166,12 +168,40 @@ def test_ack_results():
     assert len(w.sent) == 2
     w.ack(mc.CMD_ARM_DISARM, mc.RESULT_ACCEPTED, 1.6)
     assert w.accepted == ["arm"] and not w.reports
-    w.t.submit(w.cmd(mc.CMD_TAKEOFF, 3.0), 2.0)
-    w.ack(mc.CMD_TAKEOFF, mc.RESULT_DENIED, 2.1)
-    assert w.reports[-1][0] == "nack" and w.reports[-1][1]["result"] == "denied"
-    assert w.reports[-1][1]["command"] == "takeoff"
+    w.t.submit(w.cmd(mc.CMD_RTL), 1.7)
+    w.ack(mc.CMD_RTL, mc.RESULT_UNSUPPORTED, 1.8)                    # asking again will not help
+    assert w.reports[-1][0] == "nack" and w.reports[-1][1]["result"] == "unsupported"
+    assert w.failures == [("return_to_launch", "unsupported")]
     w.ack(mc.CMD_RTL, mc.RESULT_ACCEPTED, 2.2)                       # nothing pending for it
     assert w.reports[-1][0] == "unexpected_ack"
+
+
+@pytest.mark.parametrize("result", [mc.RESULT_DENIED, mc.RESULT_FAILED, mc.RESULT_TEMPORARILY_REJECTED])
+def test_refusals_are_retried_a_bounded_number_of_times_then_fail(result):
+    w = Wire(timeout_s=1.0, retries=3)
+    w.t.submit(w.cmd(mc.CMD_TAKEOFF, 3.0), 0.0)
+    now, acked = 0.0, 0
+    while w.t.busy(mc.CMD_TAKEOFF):
+        assert now < 20.0, "retried without bound"
+        if len(w.sent) > acked:
+            acked = len(w.sent)
+            w.ack(mc.CMD_TAKEOFF, result, now + 0.05)                 # every try is refused
+        now += 0.1
+        w.t.service(now)
+    assert len(w.sent) == 4                                          # first send + 3 retries
+    name = mc.RESULT_NAMES[result]
+    assert w.reports == [("nack", {"command": "takeoff", "result": name, "tries": 4, "params": [3.0]})]
+    assert w.failures == [("takeoff", name)] and w.accepted == []
+
+
+def test_a_refusal_then_acceptance_is_no_failure():
+    w = Wire(timeout_s=1.0, retries=3)
+    w.t.submit(w.cmd(mc.CMD_ARM_DISARM, 1.0, name="arm"), 0.0)
+    w.ack(mc.CMD_ARM_DISARM, mc.RESULT_DENIED, 0.1)                  # a pre-flight check still failing
+    w.t.service(1.2)
+    assert len(w.sent) == 2
+    w.ack(mc.CMD_ARM_DISARM, mc.RESULT_ACCEPTED, 1.3)
+    assert w.accepted == ["arm"] and not w.reports and not w.failures
 
 
 def test_same_id_commands_go_one_at_a_time_and_the_latest_wins():

@@ -5,15 +5,26 @@ from __future__ import annotations
 import math
 import os
 import struct
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
-import pyarrow.parquet as pq
 import pytest
 
+from swarmbox.analysis.ulog import local_position
 from swarmbox.hal.mavlink.frames import GeoFrame
 from swarmbox.hal.mavlink.link import parse_connection
-from swarmbox.hal.px4.sitl import SitlOptions, connection_of, find_build, instance_env, write_ulog_table
+from swarmbox.hal.px4.params import BootClock
+from swarmbox.hal.px4.sitl import (
+    SitlOptions,
+    connection_of,
+    find_build,
+    instance_env,
+    resolve_build,
+    runnable_px4,
+    write_ulog_index,
+)
 from tests.conftest import table
 
 PX4_BUILD = os.environ.get("SWARMBOX_PX4_BUILD")
@@ -70,18 +81,53 @@ def fake_ulog(path: Path, rows: list[tuple[int, float, float, float]]) -> None:
 
 
 def test_ulog_goes_on_the_drone_clock_in_the_mission_frame(tmp_path):
-    a, b = tmp_path / "a.ulg", tmp_path / "b.ulg"
+    inst = tmp_path / "px4" / "instance_1" / "log"
+    inst.mkdir(parents=True)
+    a, b = inst / "a.ulg", inst / "b.ulg"
     fake_ulog(a, [(1_000_000 + k * 100_000, 0.1 * k, 0.0, -3.0) for k in range(5)])
     fake_ulog(b, [(9_000_000, 1.0, 2.0, -1.0)])
-    clock = lambda boot_s: 10.0 + 0.5 * np.asarray(boot_s)   # noqa: E731  boot -> drone clock
-    out = write_ulog_table([a, b], clock, (-3.0, 3.0, 0.0), tmp_path / "logs" / "drone_1" / "x.parquet")
-    t = pq.read_table(out).to_pydict()
-    assert t["t_s"] == pytest.approx([10.5, 10.55, 10.6, 10.65, 10.7, 14.5])
-    assert t["pos_n"][:2] == pytest.approx([-3.0, -2.9]) and t["pos_e"][-1] == pytest.approx(5.0)
+    clock = BootClock(a=20.0, b=0.5, offset_s=0.0, scale=0.5)   # boot -> drone clock: (20 + 0.5 b) / 2
+    write_ulog_index(tmp_path / "logs" / "drone_1", [a, b], clock, (-3.0, 3.0, 0.0))
+    t = local_position(tmp_path, 1)
+    assert list(t["t_s"]) == pytest.approx([10.25, 10.275, 10.3, 10.325, 10.35, 12.25])
+    assert list(t["pos_n"][:2]) == pytest.approx([-3.0, -2.9]) and t["pos_e"].iloc[-1] == pytest.approx(5.0)
     assert t["pos_d"][0] == pytest.approx(-3.0) and t["vx_m_s"][0] == pytest.approx(0.5)
-    assert t["heading_rad"][0] == pytest.approx(0.25) and all(t["xy_valid"])
-    assert t["px4_timestamp_us"][-1] == 9_000_000 and t["ulog_file"][-1] == "b.ulg"
-    assert write_ulog_table([], clock, (0.0, 0.0, 0.0), tmp_path / "none.parquet") is None
+    assert t["heading_rad"][0] == pytest.approx(0.25) and t["xy_valid"].all()
+    assert t["px4_timestamp_us"].iloc[-1] == 9_000_000 and t["ulog_file"].iloc[-1] == "b.ulg"
+    assert local_position(tmp_path, 2).empty
+
+
+def test_build_is_found_from_config_env_or_shared_location(tmp_path, monkeypatch):
+    build = tmp_path / "sitl"
+    (build / "bin").mkdir(parents=True)
+    (build / "etc").mkdir()
+    (build / "bin" / "px4").write_text("#!/bin/sh\n")
+    monkeypatch.setenv("HOME", str(tmp_path))
+    assert resolve_build("~/sitl") == build.resolve()                     # `~` expanded
+    assert resolve_build(None) is None and resolve_build("null") is None  # connect only
+    assert resolve_build("auto", {"SWARMBOX_PX4_BUILD": str(build)}) == build.resolve()
+    with pytest.raises(FileNotFoundError, match="SWARMBOX_PX4_BUILD: no PX4 SITL build at"):
+        resolve_build("auto", {"SWARMBOX_PX4_BUILD": str(tmp_path / "nowhere")})
+    with pytest.raises(FileNotFoundError, match="no PX4 SITL build at"):
+        resolve_build(str(tmp_path / "nowhere"))
+
+
+def test_aliases_that_lost_their_symlinks_are_linked_afresh(tmp_path):
+    build = tmp_path / "sitl"
+    (build / "bin").mkdir(parents=True)
+    (build / "etc").mkdir()
+    (build / "bin" / "px4").write_text("#!/bin/sh\n")
+    (build / "bin" / "px4").chmod(0o755)
+    (build / "bin" / "px4-alias.sh").write_text("alias x=y\n")
+    (build / "bin" / "px4-param").write_text("px4")          # a copied symlink: plain text
+    assert runnable_px4(build, tmp_path / "w") == tmp_path / "w" / "bin" / "px4"
+    shadow = tmp_path / "w" / "bin"
+    assert os.readlink(shadow / "px4-param") == "px4" and os.access(shadow / "px4-param", os.X_OK)
+    assert (shadow / "px4").resolve() == (build / "bin" / "px4").resolve()
+    assert (shadow / "px4-alias.sh").read_text() == "alias x=y\n"
+    (build / "bin" / "px4-param").unlink()
+    (build / "bin" / "px4-param").symlink_to("px4")
+    assert runnable_px4(build, tmp_path / "w2") == build / "bin" / "px4"   # intact build: as is
 
 
 @needs_px4
@@ -94,8 +140,8 @@ def test_hover_on_px4_sitl(run, tmp_path):
         st = table(d, f"drone_{i}", "state")
         assert list(table(d, f"drone_{i}", "stages")["stage"]) == [1, 2, 3, 4, 5]
         assert st["pos_d"].min() < -2.5 and not st.iloc[-1]["armed"] and st.iloc[-1]["landed"]
-        assert math.hypot(st.iloc[-1]["pos_n"] - home[0], st.iloc[-1]["pos_e"] - home[1]) < 1.5
-        ulog = pq.read_table(d / "logs" / f"drone_{i}" / "ulog_local_position.parquet").to_pandas()
+        assert math.hypot(st.iloc[-1]["pos_n"] - home[0], st.iloc[-1]["pos_e"] - home[1]) < 2.5
+        ulog = local_position(d, i)
         airborne = ulog[ulog["pos_d"] < -2.5]
         # the ULog's airborne span lies within the bridge's on the drone's clock
         assert len(airborne) and st["t_s"].min() - 1 < airborne["t_s"].min() < st["t_s"].max()
@@ -154,5 +200,35 @@ def test_launcher_runs_eleven_instances_on_px4_port_plan(tmp_path, monkeypatch):
         backend.close()
     for i in range(n):
         assert (tmp_path / "run" / "px4" / f"instance_{i}" / "out.log").is_file()
-        ulog = pq.read_table(tmp_path / "run" / "logs" / f"drone_{i}" / "ulog_local_position.parquet")
-        assert ulog.num_rows == 10 and ulog.column("pos_n")[0].as_py() == pytest.approx(3.0 * i)
+        ulog = local_position(tmp_path / "run", i)
+        assert len(ulog) == 10 and ulog["pos_n"][0] == pytest.approx(3.0 * i)
+
+
+def test_launching_and_closing_px4_loads_no_pandas(tmp_path):
+    """The run path of a launched fleet (start, fly, stop, index the ULogs) never loads pandas or pyulog."""
+    if not ports_free([14543, 14583]):
+        pytest.skip("PX4's SITL ports on 127.0.0.1 are in use on this machine")
+    build = tmp_path / "build"
+    (build / "bin").mkdir(parents=True)
+    (build / "etc").mkdir()
+    (build / "bin" / "px4").write_text(FAKE_PX4.replace('--instance "$2"', '--instance 3'))
+    (build / "bin" / "px4").chmod(0o755)
+    fake_ulog(build / "fake.ulg", [(k * 200_000, 0.0, 0.0, -0.1 * k) for k in range(10)])
+    code = f"""
+import sys, numpy as np
+from swarmbox.hal.px4 import backend, sitl
+sitl.connection_of = lambda i: "udpin:127.0.0.1:14543"
+backend.SitlLauncher.connections = lambda self: ["udpin:127.0.0.1:14543"]
+b = backend.Px4Backend(homes_ned_m=[(0.0, 0.0, 0.0)], tick_s=0.025, rng=np.random.default_rng(0),
+                       px4_build={str(build)!r}, run_dir={str(tmp_path / "run")!r}, speed=2.0, system_ids=[4])
+for _ in range(40):
+    b.step(0.025)
+b.close()
+print(sorted({{"pandas", "pyulog", "matplotlib"}} & set(sys.modules)))
+"""
+    env = {**os.environ, "SWARMBOX_TEST_PYTHON": sys.executable,
+           "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
+    assert proc.returncode == 0 and proc.stdout.strip() == "[]", proc.stdout + proc.stderr
+    assert (tmp_path / "run" / "logs" / "drone_0" / "ulog.json").is_file()
+    assert len(local_position(tmp_path / "run", 0)) == 10

@@ -25,6 +25,7 @@ from typing import Any, NamedTuple
 from pymavlink.dialects.v20 import common as mavlink
 
 from swarmbox.api import FlightMode, Setpoint, SetpointKind
+from swarmbox.hal.mavlink.signing import signing_timestamp
 
 Vec3 = tuple[float, float, float]
 MAVError = mavlink.MAVError
@@ -301,13 +302,16 @@ class Decoder:
 
     Counters: ``packets`` framed, ``decoded``, ``skipped`` (not wanted, never decoded; per message
     id in ``skipped_ids``), ``garbage_bytes`` and ``bad_packets`` (framed, but the CRC or length
-    was wrong).
+    was wrong, or unsigned / wrongly signed while a ``signing_key`` is set: ``signature_rejected``).
     """
 
-    def __init__(self, wanted: set[int] | frozenset[int]) -> None:
+    def __init__(self, wanted: set[int] | frozenset[int], signing_key: bytes | None = None) -> None:
         self.wanted = set(wanted)
         self._mav = mavlink.MAVLink(None)
+        if signing_key is not None:
+            self._mav.signing.secret_key = signing_key   # pymavlink then rejects unsigned packets
         self.packets = self.decoded = self.skipped = self.bad_packets = self.garbage_bytes = 0
+        self.signature_rejected = 0
         self.skipped_ids: dict[int, int] = {}
 
     def decode(self, data: bytes) -> Iterator[tuple[Packet, Any]]:
@@ -325,7 +329,11 @@ class Decoder:
             try:
                 msg = mav.decode(bytearray(data[item.start:item.end]))
                 value = DECODERS[item.msg_id](msg)
-            except (MAVError, KeyError, ValueError, TypeError, AttributeError):
+            except MAVError as exc:
+                self.bad_packets += 1
+                self.signature_rejected += str(exc) == "Invalid signature"
+                continue
+            except (KeyError, ValueError, TypeError, AttributeError):
                 self.bad_packets += 1
                 continue
             self.decoded += 1
@@ -339,9 +347,14 @@ _NAN = float("nan")
 class GcsEncoder:
     """Packs what a ground station or companion computer sends to an autopilot."""
 
-    def __init__(self, system_id: int = 255, component_id: int = 190) -> None:
+    def __init__(self, system_id: int = 255, component_id: int = 190, signing_key: bytes | None = None,
+                 link_id: int = 0) -> None:
         self.system_id = system_id
         self._mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+        if signing_key is not None:
+            sign = self._mav.signing
+            sign.secret_key, sign.link_id, sign.sign_outgoing = signing_key, link_id, True
+            sign.timestamp = signing_timestamp()
 
     def _pack(self, msg: Any) -> bytes:
         buf = msg.pack(self._mav)

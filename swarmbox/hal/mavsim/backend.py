@@ -40,6 +40,7 @@ class MavsimOptions:
     vehicle_tick_s: float = 0.01        # physics step of each vehicle (simulation s)
     offboard_loss: str = "hold"         # failsafe when setpoints stop in OFFBOARD: hold | land | rtl
     sim: Mapping[str, float] | None = None   # sim backend parameters for the vehicles' dynamics
+    refuse: Mapping[str, tuple[str, ...]] | None = None   # drone_<i> -> commands it denies (faults)
 
 
 def proc_stats(pid: int) -> dict[str, float]:
@@ -86,6 +87,8 @@ class MavsimLauncher(ProcessSet):
                "--parent-pid", str(os.getpid())]
         for key, value in (o.sim or {}).items():
             cmd += ["--sim-param", f"{key}={value}"]
+        for name in (o.refuse or {}).get(f"drone_{i}", ()):
+            cmd += ["--refuse", str(name)]
         return cmd
 
     def start(self, local_ports: list[int]) -> None:
@@ -126,6 +129,16 @@ class MavsimLauncher(ProcessSet):
             shutil.rmtree(self.log_dir, ignore_errors=True)
 
 
+def _refusals(refuse: Mapping[Any, Sequence[str]], n: int) -> dict[str, tuple[str, ...]]:
+    """``refuse`` checked: keys ``drone_<i>`` of existing vehicles, values lists of command names."""
+    known = {f"drone_{i}" for i in range(n)}
+    bad = [k for k in refuse if str(k) not in known]
+    if bad:
+        raise ValueError(f"mavsim backend: refuse names unknown vehicles {bad} "
+                         f"(use drone_0 .. drone_{n - 1})")
+    return {str(k): tuple(str(c) for c in v) for k, v in refuse.items()}
+
+
 class MavsimBackend(Px4Backend):
     """The px4 bridge plus its own mavsim vehicles (implements :class:`swarmbox.hal.vehicle.Backend`).
 
@@ -137,14 +150,16 @@ class MavsimBackend(Px4Backend):
     def __init__(self, *, homes_ned_m: Sequence[Sequence[float]], tick_s: float, rng: np.random.Generator,
                  obstacles: Sequence[Mapping[str, Any]] = (), limits: SafetyLimits = SafetyLimits(),
                  vehicle_tick_s: float = 0.01, offboard_loss: str = "hold",
-                 sim: Mapping[str, float] | None = None, **params: Any) -> None:
+                 sim: Mapping[str, float] | None = None, refuse: Mapping[Any, Sequence[str]] | None = None,
+                 **params: Any) -> None:
         if params.get("px4_build"):
             raise ValueError("mavsim backend: px4_build is not used (use backend=px4 to launch PX4 SITL)")
         if not vehicle_tick_s > 0 or offboard_loss not in ("hold", "land", "rtl"):
             raise ValueError(f"mavsim backend: need vehicle_tick_s > 0 and offboard_loss hold|land|rtl, got "
                              f"{vehicle_tick_s!r}, {offboard_loss!r}")
         SimParams.from_kwargs(dict(sim or {}))   # fail here, not in N child processes
-        self.options = MavsimOptions(float(vehicle_tick_s), offboard_loss, dict(sim or {}))
+        self.options = MavsimOptions(float(vehicle_tick_s), offboard_loss, dict(sim or {}),
+                                     _refusals(refuse or {}, len(homes_ned_m)))
         self._seeds = [int(s) for s in rng.integers(0, 2**31 - 1, size=len(homes_ned_m))]
         super().__init__(homes_ned_m=homes_ned_m, tick_s=tick_s, rng=rng, obstacles=obstacles, limits=limits,
                          **params)

@@ -25,6 +25,7 @@ from swarmbox.hal.mavlink.codec import (
     CMD_RTL,
     CMD_SET_MODE,
     CMD_TAKEOFF,
+    COMMAND_NAMES,
     CUSTOM_MODE_FLAG,
     LANDED_IN_AIR,
     LANDED_LANDING,
@@ -55,7 +56,8 @@ class Commander:
     """The flight-mode logic of one mavsim vehicle; every time is simulation time."""
 
     def __init__(self, sim: SimBackend, *, home_alt_m: float, speed: float = 1.0,
-                 offboard_loss_s: float = 1.0, offboard_loss_action: str = "hold") -> None:
+                 offboard_loss_s: float = 1.0, offboard_loss_action: str = "hold",
+                 refuse: frozenset[str] = frozenset()) -> None:
         if offboard_loss_action not in _LOSS_ACTIONS:
             raise ValueError(f"offboard_loss_action must be one of {_LOSS_ACTIONS}, "
                              f"got {offboard_loss_action!r}")
@@ -65,6 +67,7 @@ class Commander:
         self.texts: list[tuple[int, str]] = []       # STATUSTEXT lines to send
         self._loss_s = offboard_loss_s * speed         # PX4's rcS multiplies COM_OF_LOSS_T by the speed
         self._loss_action = offboard_loss_action
+        self._refused = frozenset(refuse)   # fault injection: command names ("arm", "takeoff", ...) denied
         self._sp: Setpoint | None = None
         self._sp_s = -math.inf
         self._handlers: dict[int, Callable[[tuple[float, ...]], int]] = {
@@ -92,6 +95,10 @@ class Commander:
     def on_command(self, command: int, params: tuple[float, ...]) -> int:
         """A COMMAND_LONG; returns the MAV_RESULT of its COMMAND_ACK."""
         handler = self._handlers.get(command)
+        name = "arm" if command == CMD_ARM_DISARM and params[:1] == (1.0,) else COMMAND_NAMES.get(command)
+        if name in self._refused:   # e.g. a pre-flight check that never passes
+            self._text(SEVERITY_CRITICAL, f"{name} denied (injected)")
+            return RESULT_DENIED
         return RESULT_UNSUPPORTED if handler is None else handler(params)
 
     # ---- state --------------------------------------------------------------------------------

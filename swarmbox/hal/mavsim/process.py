@@ -43,8 +43,8 @@ from swarmbox.hal.mavlink.codec import (
     SetpointTargetMsg,
 )
 from swarmbox.hal.mavlink.frames import GeoFrame
-from swarmbox.hal.mavsim.link import DEFAULT_RATES_HZ, AutopilotSocket, Streams, VehicleEncoder, VehicleState
 from swarmbox.hal.mavsim.commander import Commander
+from swarmbox.hal.mavsim.link import DEFAULT_RATES_HZ, AutopilotSocket, Streams, VehicleEncoder, VehicleState
 from swarmbox.hal.safety import SafetyLimits
 from swarmbox.hal.sim.backend import SimBackend
 from swarmbox.hal.sim.params import SimParams
@@ -74,6 +74,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--sim-param", action="append", default=[], metavar="KEY=VALUE",
                     help="a sim backend parameter (conf/backend/sim.yaml key); repeatable")
     ap.add_argument("--offboard-loss", choices=("hold", "land", "rtl"), default="hold")
+    ap.add_argument("--refuse", action="append", default=[], metavar="COMMAND",
+                    help="answer this command (arm, takeoff, set_mode, ...) with DENIED: fault injection")
     ap.add_argument("--parent-pid", type=int, default=None, help="exit when this process is gone")
     ap.add_argument("--max-wall-s", type=float, default=3600.0)
     args = ap.parse_args(argv)
@@ -125,7 +127,7 @@ class MavsimProgram:
                               rng=np.random.default_rng(seed), limits=VEHICLE_LIMITS,
                               **sim_params_of(args.sim_param))
         self.commander = Commander(self.sim, home_alt_m=self.home.alt_m, speed=args.speed,
-                                   offboard_loss_action=args.offboard_loss)
+                                   offboard_loss_action=args.offboard_loss, refuse=frozenset(args.refuse))
         remote, local = ports_of(args.port_plan, args.instance)
         self.link = AutopilotSocket(local, remote)
         self.encoder = VehicleEncoder(self.system_id, self.home)

@@ -6,7 +6,8 @@ safety monitor. Each vehicle is a :class:`~swarmbox.hal.px4.vehicle.Px4Vehicle`;
 serviced without blocking inside :meth:`Px4Backend.step`, which the run loop paces on the wall clock
 (``realtime = True``, sped up by ``run.speed`` when the vehicles are simulated faster).
 
-With ``px4_build`` set, the backend also starts one PX4 SITL instance per vehicle
+With a PX4 build (``px4_build``: a path, or ``auto`` to find one), the backend also starts one PX4
+SITL instance per vehicle
 (:mod:`swarmbox.hal.px4.sitl`), waits until all are ready to arm, stops them at :meth:`close` and
 puts each instance's ULog on the run's timeline. Without it, it connects to vehicles that already run.
 
@@ -17,100 +18,30 @@ it freezes when a link falls silent.
 
 from __future__ import annotations
 
+import logging
 import math
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
-from swarmbox.hal.mavlink.codec import MSG
 from swarmbox.hal.mavlink.frames import GeoFrame, VehicleFrame
 from swarmbox.hal.mavlink.link import VehicleLink
-from swarmbox.hal.px4.vehicle import WANTED, LinkConfig, Px4Vehicle
+from swarmbox.hal.px4.params import BootClock, Px4Params, boot_clock_fit
+from swarmbox.hal.px4.sitl import SitlLauncher, resolve_build
+from swarmbox.hal.px4.vehicle import WANTED, Px4Vehicle
 from swarmbox.hal.safety import SafetyLimits
 from swarmbox.hal.vehicle import VehicleEvent
 
-__all__ = ["Launcher", "Px4Backend", "Px4Params", "boot_clock_fit"]
+__all__ = ["BootClock", "Launcher", "Px4Backend", "Px4Params", "boot_clock_fit"]
 
 Vec3 = tuple[float, float, float]
-DEFAULT_RATES_HZ = {"LOCAL_POSITION_NED": 30.0, "GLOBAL_POSITION_INT": 10.0, "GPS_RAW_INT": 10.0,
-                    "SYS_STATUS": 2.0, "EXTENDED_SYS_STATE": 2.0}
-GROUND_TRUTH_RATE_HZ = 10.0
-#: maps a vehicle's boot time (s) to its drone node's local clock (s), elementwise
-BootClock = Callable[[np.ndarray], np.ndarray]
+WAIT_REPORT_S = 5.0        # a progress line this often while waiting for vehicles
 
-
-@dataclass(frozen=True, slots=True)
-class Px4Params:
-    """Every key of ``conf/backend/px4.yaml``, with its unit in the name."""
-
-    origin_lat_deg: float = 47.397742       # the mission's geodetic origin (NED (0, 0, 0))
-    origin_lon_deg: float = 8.545594
-    origin_alt_m: float = 488.0             # AMSL, ground level at the origin
-    connections: tuple[str, ...] | None = None   # per vehicle; None: udpin:127.0.0.1:{14540+i}
-    system_ids: tuple[int, ...] | None = None    # per vehicle; None: i+1 (PX4 SITL instance i)
-    component_id: int = 1
-    connect_timeout_s: float = 60.0         # wall s to hear every vehicle at start-up
-    wait_ready: bool = False                # also wait until all are ready to arm (always when launching)
-    ready_timeout_s: float = 120.0          # wall s
-    link_timeout_s: float = 3.0             # no HEARTBEAT this long: link lost
-    heartbeat_rate_hz: float = 1.0          # our ground-station HEARTBEAT
-    setpoint_rate_hz: float = 20.0          # unchanged setpoints are re-sent at this rate (>= 10)
-    offboard_lead_s: float = 0.5            # setpoints stream this long before OFFBOARD is requested
-    command_timeout_s: float = 1.0          # COMMAND_LONG ack timeout before a retry
-    command_retries: int = 5
-    message_rates_hz: Mapping[str, float] = field(default_factory=lambda: dict(DEFAULT_RATES_HZ))
-    silence_unrequested: bool = True        # ask the autopilot to stop every other stream
-    ground_truth: bool = False              # request HIL_STATE_QUATERNION (simulators) -> true_pos_ned_m
-    stats_every_s: float = 10.0             # a link/stats event per vehicle this often
-    speed: float = 1.0                      # simulation speed factor of the vehicles (SITL, mavsim)
-    px4_build: str | None = None            # a PX4 build (px4_sitl_default): launch SITL instances
-    sitl: Mapping[str, Any] = field(default_factory=dict)   # launcher options (swarmbox.hal.px4.sitl)
-    run_dir: str | None = None              # where ULogs go (default: the Hydra run directory)
-    clocks: Mapping[str, Any] = field(default_factory=dict)  # run.clocks, to put ULogs on node clocks
-
-    @classmethod
-    def from_kwargs(cls, params: Mapping[str, Any]) -> Px4Params:
-        """Build from config keys; an unknown key raises TypeError naming it."""
-        known = {f.name for f in fields(cls)}
-        for key in params:
-            if key not in known:
-                raise TypeError(f"unknown px4 backend parameter {key!r} (known: {', '.join(sorted(known))})")
-        kw = {k: v for k, v in params.items() if v is not None or k in ("connections", "system_ids",
-                                                                         "px4_build", "run_dir")}
-        for key in ("connections", "system_ids"):
-            if kw.get(key) is not None:
-                kw[key] = tuple(kw[key])
-        p = cls(**kw)
-        p.validate()
-        return p
-
-    def validate(self) -> None:
-        if self.setpoint_rate_hz < 10:
-            raise ValueError(f"px4 backend: setpoint_rate_hz must be >= 10 (PX4 drops OFFBOARD below "
-                             f"2 Hz), got {self.setpoint_rate_hz}")
-        for name in ("link_timeout_s", "heartbeat_rate_hz", "command_timeout_s", "speed", "stats_every_s",
-                     "connect_timeout_s", "ready_timeout_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"px4 backend parameter {name!r} must be finite and > 0, got {value!r}")
-        unknown = [m for m in self.message_rates_hz if m not in MSG]
-        if unknown:
-            raise ValueError(f"px4 backend: message_rates_hz names unknown MAVLink messages {unknown}")
-        GeoFrame(self.origin_lat_deg, self.origin_lon_deg, self.origin_alt_m)
-
-    def link_config(self) -> LinkConfig:
-        rates = dict(self.message_rates_hz)
-        if self.ground_truth:
-            rates.setdefault("HIL_STATE_QUATERNION", GROUND_TRUTH_RATE_HZ)
-        return LinkConfig(self.component_id, self.link_timeout_s, self.heartbeat_rate_hz,
-                          self.setpoint_rate_hz, self.offboard_lead_s, self.command_timeout_s,
-                          self.command_retries, self.stats_every_s, self.silence_unrequested,
-                          tuple(rates.items()))
+log = logging.getLogger(__name__)
 
 
 class Launcher(Protocol):
@@ -133,22 +64,6 @@ class Launcher(Protocol):
 
     def collect(self, run_dir: Path | None, clocks: list[BootClock]) -> None:
         """After :meth:`stop`: gather the vehicles' own logs into ``run_dir``."""
-
-
-def boot_clock_fit(pairs: Sequence[tuple[float, float]]) -> tuple[float, float]:
-    """``(a, b)`` with run_s ≈ a + b · boot_s, fitted to (boot_s, run_s − boot_s) minima.
-
-    The minima per second of boot time are the least-delayed receptions; a line through them also
-    absorbs a speed mismatch between the vehicle's simulation and the run loop.
-    """
-    if not pairs:
-        return 0.0, 1.0
-    boot = np.array([p[0] for p in pairs])
-    offset = np.array([p[1] for p in pairs])
-    if len(pairs) < 3 or np.ptp(boot) < 1.0:
-        return float(offset.min()), 1.0
-    slope, intercept = np.polyfit(boot, offset, 1)
-    return float(intercept), float(1.0 + slope)
 
 
 class Px4Backend:
@@ -193,10 +108,9 @@ class Px4Backend:
         return self._clock_s - self.t0_s
 
     def _make_launcher(self, homes: list[Vec3]) -> Launcher | None:
-        if not self.params.px4_build:
-            return None
-        from swarmbox.hal.px4.sitl import SitlLauncher
-
+        p = self.params
+        if (p.connections and str(p.px4_build).lower() == "auto") or resolve_build(p.px4_build) is None:
+            return None   # listed connections: vehicles that already run
         return SitlLauncher(self.params, homes, self.frame, self.run_dir)
 
     def _open(self, homes: list[Vec3]) -> None:
@@ -207,9 +121,9 @@ class Px4Backend:
         if len(specs) != n or len(sysids) != n:
             raise ValueError(f"px4 backend: {n} vehicles but {len(specs)} connections and "
                              f"{len(sysids)} system ids")
-        wanted = set(WANTED)
+        wanted, key = set(WANTED), p.signing_bytes()
         for spec, sysid in zip(specs, sysids, strict=True):
-            self._links.append(VehicleLink(spec, sysid, wanted))
+            self._links.append(VehicleLink(spec, sysid, wanted, signing_key=key))
         if self.launcher is not None:
             self.launcher.start([link.endpoint.local_port for link in self._links])
         cfg = p.link_config()
@@ -226,7 +140,7 @@ class Px4Backend:
         return emit
 
     def _wait_for(self, what: str, done: Callable[[Px4Vehicle], bool], timeout_s: float) -> None:
-        start = last = time.monotonic()
+        start = last = reported = time.monotonic()
         while True:
             now = time.monotonic()
             self._clock_s += (now - last) * self.params.speed
@@ -235,13 +149,17 @@ class Px4Backend:
                 v.service(self._clock_s)
             if all(done(v) for v in self.vehicles):
                 return
+            if now - reported >= WAIT_REPORT_S:   # never silent while waiting for vehicles
+                reported = now
+                log.info("px4 backend: %d/%d vehicles %s after %.0f s (timeout %g s)",
+                         sum(map(done, self.vehicles)), len(self.vehicles), what, now - start, timeout_s)
             if self.launcher is not None:
                 self.launcher.check()
             if now - start > timeout_s:
-                missing = [(v.drone_id, self._links[v.drone_id].endpoint.spec)
-                           for v in self.vehicles if not done(v)]
-                raise TimeoutError(f"px4 backend: vehicles (id, connection) {missing} not {what} within "
-                                   f"{timeout_s:g} s")
+                missing = [v for v in self.vehicles if not done(v)]
+                ids = [(v.drone_id, self._links[v.drone_id].endpoint.spec) for v in missing]
+                raise TimeoutError(f"px4 backend: vehicles (id, connection) {ids} not {what} within "
+                                   f"{timeout_s:g} s{_why_silent(self._links, missing)}")
             time.sleep(0.01)
 
     # ---- Backend protocol ---------------------------------------------------------------------
@@ -298,8 +216,25 @@ class Px4Backend:
         a, b = boot_clock_fit(self.vehicles[i].clock_pairs if i < len(self.vehicles) else [])
         a -= self.t0_s
         spec = self.params.clocks.get(f"drone_{i}") or {}
-        offset_s, scale = float(spec.get("offset_s", 0.0)), 1.0 + float(spec.get("drift_ppm", 0.0)) * 1e-6
-        return lambda boot_s: (a + b * np.asarray(boot_s, dtype=float)) * scale + offset_s
+        scale = 1.0 + float(spec.get("drift_ppm", 0.0)) * 1e-6
+        return BootClock(a, b, float(spec.get("offset_s", 0.0)), scale)
+
+
+def _why_silent(links: list[VehicleLink], missing: list[Px4Vehicle]) -> str:
+    """What the silent vehicles' links did receive: other system ids, impostors, bad signatures."""
+    notes = []
+    for v in missing:
+        link = links[v.drone_id]
+        st = link.stats
+        if st.foreign:
+            notes.append(f"drone {v.drone_id}: packets seen from system ids {sorted(st.foreign)}, "
+                         f"expected {link.system_id}")
+        if link.decoder.signature_rejected:
+            notes.append(f"drone {v.drone_id}: {link.decoder.signature_rejected} packets unsigned or "
+                         "wrongly signed")
+        if not (st.foreign or link.decoder.signature_rejected) and st.rx_datagrams == 0:
+            notes.append(f"drone {v.drone_id}: nothing received on port {link.endpoint.local_port}")
+    return "; " + "; ".join(notes) if notes else ""
 
 
 def _run_dir(configured: str | None) -> Path | None:

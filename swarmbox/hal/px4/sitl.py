@@ -14,36 +14,44 @@ talks to it for good, so from the eleventh vehicle on the bridge binds its own p
 speaks first to 14580+i (``udp:127.0.0.1:24540+i@127.0.0.1:14580+i``); a later run binds the same
 port and reaches the same instance. Instances 0..9 use PX4's default ``udpin:127.0.0.1:14540+i``.
 
-After the run each instance's ``vehicle_local_position`` goes to
-``<run dir>/logs/drone_<i>/ulog_local_position.parquet`` with ``t_s`` on that drone's clock (the
-bridge fits PX4's boot time to the run's time from LOCAL_POSITION_NED arrivals).
+Where the build is (``px4_build``): a path (``~`` expanded) to the build or to a PX4-Autopilot tree;
+``auto``: ``$SWARMBOX_PX4_BUILD``, else ``../shared/px4-sitl`` next to the repository, else no launch
+(connect to vehicles that already run); ``null``: never launch.
+
+A build whose command aliases (``bin/px4-param`` ...) lost their symlinks in a copy still runs: the
+launcher then links them afresh in ``<work dir>/bin`` and starts PX4 from there.
+
+After the run each instance's ULogs stay in its working directory and ``logs/drone_<i>/ulog.json``
+records them with the vehicle's :class:`~swarmbox.hal.px4.params.BootClock` (boot time -> that
+drone's clock) and home; :mod:`swarmbox.analysis.ulog` turns them into tables on the run's timeline
+(parsing ULogs is the analyzer's job, not the run's).
 """
 
 from __future__ import annotations
 
 import atexit
+import json
 import os
+import shutil
 import signal
 import subprocess
 import tempfile
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
-
-import numpy as np
+from typing import Any
 
 from swarmbox.hal.launch import ProcessSet
 from swarmbox.hal.mavlink.frames import GeoFrame
-
-if TYPE_CHECKING:
-    from swarmbox.hal.px4.backend import BootClock, Px4Params
+from swarmbox.hal.px4.params import BootClock, Px4Params
 
 Vec3 = tuple[float, float, float]
-ULOG_TABLE = "ulog_local_position"
-_ULOG_FIELDS = (("x", "x_m"), ("y", "y_m"), ("z", "z_m"), ("vx", "vx_m_s"), ("vy", "vy_m_s"),
-                ("vz", "vz_m_s"), ("heading", "heading_rad"))
+ENV_BUILD = "SWARMBOX_PX4_BUILD"
+#: where CI keeps a prebuilt SITL: ``shared/px4-sitl`` next to the repository (or the working directory)
+SHARED_BUILDS = (Path(__file__).resolve().parents[4] / "shared" / "px4-sitl",
+                 Path("..") / "shared" / "px4-sitl")
+ULOG_INDEX = "ulog.json"
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,6 +84,46 @@ def find_build(path: str | Path) -> Path:
                             "build/px4_sitl_default (build PX4 with `make px4_sitl_default`)")
 
 
+def resolve_build(configured: str | None, env: Mapping[str, str] | None = None) -> Path | None:
+    """The PX4 build to launch for ``px4_build`` (see the module docstring); None: connect only.
+
+    A configured path or ``$SWARMBOX_PX4_BUILD`` that holds no build raises FileNotFoundError naming it.
+    """
+    env = os.environ if env is None else env
+    if configured is None or str(configured).strip().lower() in ("", "null", "none"):
+        return None
+    if str(configured).strip().lower() != "auto":
+        return find_build(configured)
+    if env.get(ENV_BUILD):
+        try:
+            return find_build(env[ENV_BUILD])
+        except FileNotFoundError as exc:
+            raise FileNotFoundError(f"{ENV_BUILD}: {exc}") from None
+    for candidate in SHARED_BUILDS:
+        try:
+            return find_build(candidate)
+        except FileNotFoundError:
+            pass
+    return None
+
+
+def runnable_px4(build: Path, work_dir: Path) -> Path:
+    """The ``px4`` binary to start. PX4's startup script calls ``px4-<module>`` aliases from the
+    binary's directory; where a copy turned those symlinks into plain files, link them afresh under
+    ``work_dir/bin`` (PX4 puts the directory it was started from on its PATH)."""
+    binary = build / "bin" / "px4"
+    aliases = [p for p in (build / "bin").glob("px4-*") if p.suffix != ".sh"]
+    if all(os.access(p, os.X_OK) for p in aliases):
+        return binary
+    shadow = work_dir / "bin"
+    shadow.mkdir(parents=True, exist_ok=True)
+    for p in (binary, *(build / "bin").glob("px4-*")):
+        link = shadow / p.name
+        if not link.is_symlink():
+            link.symlink_to("px4" if p in aliases else p)
+    return shadow / "px4"
+
+
 def connection_of(i: int) -> str:
     """The bridge's connection string for PX4 instance ``i`` (see the module docstring)."""
     if i <= 9:
@@ -105,11 +153,16 @@ class SitlLauncher(ProcessSet):
     what = "PX4 instance"
 
     def __init__(self, params: Px4Params, homes: list[Vec3], frame: GeoFrame, run_dir: Path | None) -> None:
-        self.build = find_build(params.px4_build or "")
+        build = resolve_build(params.px4_build)
+        if build is None:
+            raise ValueError(f"px4 backend: no PX4 build to launch for px4_build={params.px4_build!r}")
+        self.build = build
         self.options = SitlOptions.from_mapping(params.sitl)
         self.homes, self.frame, self.speed = homes, frame, params.speed
+        self._own_dir = run_dir is None   # a temporary working directory, removed after the run
         self.work_dir = (run_dir / "px4" if run_dir is not None
                          else Path(tempfile.mkdtemp(prefix="swarmbox_px4_")))
+        self.binary = runnable_px4(build, self.work_dir)
         self.procs: list[subprocess.Popen[bytes]] = []
         self._reported: set[int] = set()
         self._stopped = False
@@ -126,7 +179,7 @@ class SitlLauncher(ProcessSet):
             wd = self.instance_dir(i)
             wd.mkdir(parents=True, exist_ok=True)
             env = instance_env(self.frame.geodetic_of(home), self.options, self.speed, os.environ)
-            cmd = [str(self.build / "bin" / "px4"), "-i", str(i), "-d", str(self.build / "etc")]
+            cmd = [str(self.binary), "-i", str(i), "-d", str(self.build / "etc")]
             with open(wd / "out.log", "wb") as out, open(wd / "err.log", "wb") as err:
                 self.procs.append(subprocess.Popen(cmd, cwd=wd, env=env, stdin=subprocess.DEVNULL, stdout=out,
                                                    stderr=err, start_new_session=True))
@@ -158,53 +211,24 @@ class SitlLauncher(ProcessSet):
                 proc.wait(timeout=5.0)
 
     def collect(self, run_dir: Path | None, clocks: list[BootClock]) -> None:
-        """Each instance's ULogs -> ``logs/drone_<i>/ulog_local_position.parquet`` (if any)."""
+        """Index each instance's ULogs with its clock and home in ``logs/drone_<i>/ulog.json``."""
+        if self._own_dir:
+            shutil.rmtree(self.work_dir, ignore_errors=True)
         if run_dir is None or not self.options.logger:
             return
         for i, home in enumerate(self.homes):
             ulogs = sorted(self.instance_dir(i).rglob("*.ulg"), key=lambda p: p.stat().st_mtime)
-            out = run_dir / "logs" / f"drone_{i}" / f"{ULOG_TABLE}.parquet"
             if ulogs:
-                write_ulog_table(ulogs, clocks[i], home, out)
+                write_ulog_index(run_dir / "logs" / f"drone_{i}", ulogs, clocks[i], home)
 
 
-def ulog_local_position(paths: Sequence[Path], clock: BootClock, home_ned_m: Vec3) -> dict[str, np.ndarray]:
-    """``vehicle_local_position`` of ULog files as columns, with ``t_s`` on the drone's clock and
-    ``pos_n/pos_e/pos_d`` in the mission frame (local + home, as the bridge converts)."""
-    from pyulog import ULog
-
-    parts: list[dict[str, np.ndarray]] = []
-    for path in paths:
-        ulog = ULog(str(path), ["vehicle_local_position"])
-        for data in ulog.data_list:
-            if data.name != "vehicle_local_position" or data.multi_id != 0:
-                continue
-            d = data.data
-            stamp = d["timestamp"].astype(np.int64)
-            cols = {"t_s": clock(stamp / 1e6), "px4_timestamp_us": stamp}
-            for src, dst in _ULOG_FIELDS:
-                cols[dst] = d[src].astype(np.float64) if src in d else np.full(len(stamp), np.nan)
-            for k, axis in enumerate(("pos_n", "pos_e", "pos_d")):
-                cols[axis] = cols[("x_m", "y_m", "z_m")[k]] + home_ned_m[k]
-            for flag in ("xy_valid", "z_valid"):
-                cols[flag] = d[flag].astype(bool) if flag in d else np.zeros(len(stamp), dtype=bool)
-            cols["ulog_file"] = np.array([path.name] * len(stamp), dtype=object)
-            parts.append(cols)
-    if not parts:
-        return {}
-    return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
-
-
-def write_ulog_table(paths: Sequence[Path], clock: BootClock, home_ned_m: Vec3, out: Path) -> Path | None:
-    """Write :func:`ulog_local_position` as Parquet (atomically); None if the logs hold no rows."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    cols = ulog_local_position(paths, clock, home_ned_m)
-    if not cols:
-        return None
-    out.parent.mkdir(parents=True, exist_ok=True)
+def write_ulog_index(drone_dir: Path, ulogs: list[Path], clock: BootClock, home_ned_m: Vec3) -> Path:
+    """``ulog.json``: the ULog files (relative to ``drone_dir``), in order, the boot clock and home."""
+    drone_dir.mkdir(parents=True, exist_ok=True)
+    index = {"files": [os.path.relpath(p, drone_dir) for p in ulogs], "clock": clock.as_dict(),
+             "home_ned_m": list(home_ned_m)}
+    out = drone_dir / ULOG_INDEX
     tmp = out.with_name(f".{out.name}.tmp")
-    pq.write_table(pa.table({k: pa.array(v) for k, v in cols.items()}), tmp)
+    tmp.write_text(json.dumps(index, indent=1))
     os.replace(tmp, out)
     return out

@@ -19,13 +19,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 from swarmbox.api import Setpoint, SetpointVerdict, Telemetry
 from swarmbox.hal.mavlink.codec import (
     CMD_ARM_DISARM,
     CMD_LAND,
+    CMD_REQUEST_MESSAGE,
     CMD_RTL,
     CMD_SET_MESSAGE_INTERVAL,
     CMD_SET_MODE,
@@ -54,6 +54,8 @@ from swarmbox.hal.mavlink.codec import (
 )
 from swarmbox.hal.mavlink.frames import VehicleFrame
 from swarmbox.hal.mavlink.link import Command, CommandTracker, VehicleLink
+from swarmbox.hal.px4.linkreport import LinkReport
+from swarmbox.hal.px4.params import LinkConfig
 from swarmbox.hal.safety import SafetyLimits, check_setpoint
 
 Vec3 = tuple[float, float, float]
@@ -61,29 +63,13 @@ Vec3 = tuple[float, float, float]
 Emit = Callable[[str, str, dict[str, Any]], None]
 _NAN = math.nan
 _ZERO3 = (0.0, 0.0, 0.0)
-_HAS_LINK_FIELD = "link_ok" in Telemetry._fields
 WARNING_SEVERITY = 4          # STATUSTEXT at this severity or worse becomes an event
 STATE_GRACE_S = 0.3           # a HEARTBEAT this soon after an accepted command may predate it
 SILENCE_AFTER = 20            # unrequested packets of one id before asking PX4 to stop them
+_NOT_CRITICAL = frozenset((CMD_SET_MESSAGE_INTERVAL, CMD_REQUEST_MESSAGE))
 WANTED = frozenset(MSG[m] for m in (
     "HEARTBEAT", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "GPS_RAW_INT", "SYS_STATUS",
     "EXTENDED_SYS_STATE", "COMMAND_ACK", "STATUSTEXT", "HIL_STATE_QUATERNION"))
-
-
-@dataclass(frozen=True, slots=True)
-class LinkConfig:
-    """Per-vehicle link timing (all in vehicle/run seconds, i.e. sped up with the simulation)."""
-
-    component_id: int = 1
-    link_timeout_s: float = 3.0
-    heartbeat_rate_hz: float = 1.0
-    setpoint_rate_hz: float = 20.0
-    offboard_lead_s: float = 0.5
-    command_timeout_s: float = 1.0
-    command_retries: int = 5
-    stats_every_s: float = 10.0
-    silence_unrequested: bool = True
-    message_rates_hz: tuple[tuple[str, float], ...] = ()
 
 
 class Px4Vehicle:
@@ -94,9 +80,10 @@ class Px4Vehicle:
         self.drone_id, self.home_ned_m = drone_id, frame.home_ned_m
         self._link, self._cfg, self._frame, self._limits, self._emit = link, cfg, frame, limits, emit
         self._target = (link.system_id, cfg.component_id)
-        self._enc = GcsEncoder()
+        self._enc = GcsEncoder(signing_key=cfg.signing_key, link_id=drone_id & 0xFF)
         self._cmds = CommandTracker(self._send_command, self._command_report, cfg.command_timeout_s,
-                                    cfg.command_retries, self._command_timed_out)
+                                    cfg.command_retries, self._command_timed_out, self._command_failed)
+        self.failure = ""                          # the latest flight command the autopilot refused
         self._on_regain: Command | None = None      # the last command lost with the link
         self._now = 0.0
         self.connected = self.link_lost = False
@@ -116,8 +103,8 @@ class Px4Vehicle:
         self._blocked = ""                         # why setpoints are not followed (autopilot's choice)
         self._noted: set[tuple[str, str]] = set()
         self._silenced: dict[int, tuple[int, float, int]] = {}   # msg id -> (tries, at_s, count then)
-        self._checks_s = self._stats_s = 0.0
-        self._bad_seen, self._foreign_seen, self._odd_acks = (0, 0), set(), set()
+        self._checks_s, self._odd_acks = 0.0, set()
+        self._link_report = LinkReport(link, emit, cfg.stats_every_s)
         self.clock_pairs: list[tuple[float, float]] = []   # (vehicle boot s, our clock - boot) minima
         self._handlers: dict[type, Callable[[Any], None]] = {
             LocalPositionMsg: self._on_local, GlobalPositionMsg: self._on_global, GnssMsg: self._on_gnss,
@@ -206,6 +193,9 @@ class Px4Vehicle:
             self._gcs_hb_s = now_s
             self._link.send(self._enc.heartbeat())
         if not self.connected:
+            if now_s - self._checks_s >= 1.0:   # why not: packets from other system ids?
+                self._checks_s = now_s
+                self._link_report(now_s, connected=False)
             return
         if not self.link_lost and now_s - self._hb_s > self._cfg.link_timeout_s:
             self._lose_link()
@@ -214,7 +204,7 @@ class Px4Vehicle:
         if now_s - self._checks_s >= 1.0:
             self._checks_s = now_s
             self._silence_unrequested()
-            self._report_link()
+            self._link_report(now_s, connected=True)
 
     def _stream(self) -> None:
         sp, now = self._sp, self._now
@@ -302,10 +292,9 @@ class Px4Vehicle:
     def _build_telemetry(self) -> Telemetry:
         pos = self.home_ned_m if self._local is None else self._frame.to_mission(self._local)
         landed = self._landed_state == LANDED_ON_GROUND if self._landed_state else not self._armed
-        extra = {"link_ok": not self.link_lost} if _HAS_LINK_FIELD else {}
         self._tel = Telemetry(self._pos_s, pos, self._vel, self._yaw, self._gnss, self._gnss_seq, self._armed,
                               landed, flight_mode(self._mode, self._armed, landed), self._battery,
-                              self._ready and not self.link_lost, self._true, **extra)
+                              self._ready and not self.link_lost, self._true, link_ok=not self.link_lost)
         return self._tel
 
     def _submit(self, command: int, params: tuple[float, ...], on_accepted: Callable[[], None] | None = None,
@@ -317,6 +306,16 @@ class Px4Vehicle:
     def _command_timed_out(self, cmd: Command) -> None:
         if self.link_lost and not cmd.quiet and cmd.command != CMD_SET_MESSAGE_INTERVAL:
             self._on_regain = cmd
+
+    def _command_failed(self, cmd: Command, result: str) -> None:
+        """A flight command refused to the end of its retries: a ``failure`` event (the drone aborts).
+        Not a disarm refused in the air, nor a command lost with the link (resent when it returns)."""
+        if (cmd.command in _NOT_CRITICAL or (cmd.command == CMD_ARM_DISARM and cmd.params[:1] == (0.0,))
+                or (self.link_lost and result == "no ack")):
+            return
+        self.failure = f"autopilot refused {cmd.name} ({result} after {cmd.tries} tries)"
+        self._emit("failure", "command_failed", {"command": cmd.name, "result": result, "tries": cmd.tries,
+                                                 "reason": self.failure})
 
     def _send_command(self, command: int, params: tuple[float, ...], confirmation: int) -> bool:
         return self._link.send(self._enc.command(self._target, command, params, confirmation))
@@ -372,17 +371,3 @@ class Px4Vehicle:
             if tries < 3 and self._now - at_s >= 5.0 and count - then >= SILENCE_AFTER:
                 self._silenced[msg_id] = (tries + 1, self._now, count)
                 self._submit(CMD_SET_MESSAGE_INTERVAL, (float(msg_id), -1.0), quiet=True)
-
-    def _report_link(self) -> None:
-        dec, st = self._link.decoder, self._link.stats
-        bad = (dec.garbage_bytes, dec.bad_packets)
-        if bad != self._bad_seen:
-            self._emit("link", "garbage", {"garbage_bytes": bad[0] - self._bad_seen[0],
-                                           "bad_packets": bad[1] - self._bad_seen[1]})
-            self._bad_seen = bad
-        for sysid in st.foreign.keys() - self._foreign_seen:
-            self._foreign_seen.add(sysid)
-            self._emit("link", "foreign_system", {"system_id": sysid, "packets": st.foreign[sysid]})
-        if self._now - self._stats_s >= self._cfg.stats_every_s:
-            self._stats_s = self._now
-            self._emit("link", "stats", st.as_dict(dec))

@@ -1,0 +1,189 @@
+"""Tables and figures of the RQ3 study and of the diagnosis benchmark, from the rows the sweep wrote.
+
+    python experiments/rq3_faults/report.py rq3   results/rq3   --out experiments/rq3_faults/tables
+    python experiments/rq3_faults/report.py bench results/bench --out experiments/rq3_faults/bench
+
+The rows come from :func:`swarmbox.analysis.detection.evaluate_run`: the analyzer scanned every run
+without the fault events, and the scoring columns were added afterwards from them. Paper Tables 2,
+4 and 5 use the default detector (Tukey, k = 1.5, thresholds x 1) and, for Table 2, the per-drone
+estimator-reset baseline.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parents[1]))
+
+from sweep import collect  # noqa: E402
+
+from swarmbox.analysis import detection  # noqa: E402
+from swarmbox.analysis.tables import to_markdown, write_table  # noqa: E402
+
+UNITS = {"gps_drift": "m/s", "gps_bias": "m", "gps_noise": "x sigma", "latency": "ms", "packet_loss": "ratio",
+         "burst_loss": "p_enter"}
+
+
+def is_default_setting(rows: pd.DataFrame) -> pd.Series:
+    """The default detector's rows and the baseline's."""
+    sb = (rows["detector"] == "swarmbox") & (rows["rule"] == "tukey") & (rows["threshold_scale"] == 1.0)
+    return sb | (rows["detector"] == "baseline")
+
+
+def default_rows(rows: pd.DataFrame) -> pd.DataFrame:
+    return rows[is_default_setting(rows)]
+
+
+def _mean(values: pd.Series) -> float:
+    v = values.dropna().to_numpy(dtype="float64")
+    return float("nan") if v.size == 0 else float(np.inf) if np.isinf(v).any() else float(v.mean())
+
+
+def summarize(rows: pd.DataFrame) -> pd.DataFrame:
+    """Per fault, magnitude and detector: runs, target detected, first alarm on the target, means over
+    the detected runs of t_f, tau_d and Sigma_a, and the mean measured excess."""
+    out = []
+    groups = default_rows(rows).groupby(["fault", "magnitude", "detector"], sort=True)
+    for (fault, mag, detector), g in groups:
+        hit = g[g["detected"].astype(bool)]
+        out.append({"fault": fault, "magnitude": mag, "detector": detector, "runs": len(g),
+                    "detected": len(hit),
+                    "localized": int(g["localized"].astype(bool).sum()), "t_f_s": _mean(hit["t_f_s"]),
+                    "tau_d": _mean(hit["tau_d"]), "sigma_a": _mean(hit["sigma_a"]),
+                    "measured": _mean(g["measured"]) if "measured" in g else np.nan,
+                    "false_alarms": int(g["false_alarms"].sum())})
+    return pd.DataFrame(out)
+
+
+def _cell(r: pd.Series | None, key: str, scale: float = 1.0) -> str:
+    if r is None or r["detected"] == 0:
+        return "Not detected" if key == "t_f_s" else "N/A"
+    v = r[key] * scale
+    text = "∞" if np.isinf(v) else f"{v:.2f}"
+    return text if r["detected"] == r["runs"] else f"{text} ({r['detected']}/{r['runs']})"
+
+
+def table2(summary: pd.DataFrame) -> pd.DataFrame:
+    out = []
+    for mag, g in summary[summary["fault"] == "gps_drift"].groupby("magnitude", sort=True):
+        by = {r["detector"]: r for _, r in g.iterrows()}
+        b, s = by.get("baseline"), by.get("swarmbox")
+        row = {"drift_m_s": mag}
+        for key, name in (("t_f_s", "t_f (s)"), ("tau_d", "tau_d (m)"), ("sigma_a", "Sigma_a")):
+            row[f"{name} baseline"], row[f"{name} SwarmBox"] = _cell(b, key), _cell(s, key)
+        row["first alarm on target"] = f"{s['localized']}/{s['runs']}" if s is not None else ""
+        out.append(row)
+    return pd.DataFrame(out)
+
+
+def network_table(summary: pd.DataFrame, fault: str) -> pd.DataFrame:
+    part = summary[(summary["fault"] == fault) & (summary["detector"] == "swarmbox")].sort_values("magnitude")
+    unit, k, label = ("ms", 1.0, " ms") if fault == "latency" else ("%", 100.0, " %")
+    lines = {"t_f (ms)": lambda r: _cell(r, "t_f_s", 1e3), f"tau_d ({unit})": lambda r: _cell(r, "tau_d", k),
+             "Sigma_a": lambda r: _cell(r, "sigma_a"),
+             f"measured excess ({unit})": lambda r: f"{r['measured'] * k:.2f}",
+             "first alarm on target": lambda r: f"{r['localized']}/{r['runs']}"}
+    return pd.DataFrame([{"metric": name, **{f"{r['magnitude'] * k:g}{label}": fn(r)
+                                             for _, r in part.iterrows()}}
+                         for name, fn in lines.items()])
+
+
+def timeline_figures(root: Path, out: Path) -> list[Path]:
+    """Per fault, the run of the middle magnitude on drone 4: what the analyzer saw, with the
+    injected fault drawn as a separate ground-truth overlay."""
+    from swarmbox.analysis import diagnosis as dg
+    from swarmbox.analysis import diagnosis_plots, figures, scoring
+    from swarmbox.analysis.load import load_run
+    from swarmbox.analysis.unify import unify
+
+    written = []
+    for kind in ("drift", "latency", "loss"):
+        run_dir = root / kind / "m2_t4"
+        if not (run_dir / "run.json").exists():
+            continue
+        run = load_run(run_dir)
+        unify(run)
+        series = dg.drone_series(run)
+        truth = scoring.ground_truth(run.tables["events"])[0]
+        fig = diagnosis_plots.timeline(series, dg.scan(series), truth=truth)
+        written += figures.save(fig, out / "figures", f"rq3_timeline_{truth.name}", formats=("png",))
+    return written
+
+
+def rq3_report(rows: pd.DataFrame, out: Path, root: Path) -> list[Path]:
+    summary = summarize(rows)
+    written = write_table(rows, out, "rq3_runs", markdown=False) + write_table(summary, out, "rq3_summary")
+    for name, table in (("rq3_table2", table2(summary)), ("rq3_table4", network_table(summary, "latency")),
+                        ("rq3_table5", network_table(summary, "packet_loss"))):
+        written += write_table(table, out, name)
+        print(f"## {name}\n\n{to_markdown(table)}")
+    return written + timeline_figures(root, out)
+
+
+def acceptance_table(smallest: pd.DataFrame) -> pd.DataFrame:
+    """Per fault, swarm size and network: the smallest magnitude found in >= 90 % of the runs by the
+    most sensitive setting with <= 1 false alarm per drone-hour."""
+    view = smallest.copy()
+    view["smallest_magnitude"] = [f"{m:g} {UNITS.get(f, '')}" if np.isfinite(m) else "none of the swept"
+                                  for m, f in zip(view["smallest_magnitude"], view["fault"], strict=True)]
+    cols = ["fault", "detector", "n_drones", "network", "smallest_magnitude", "detection_rate",
+            "localization", "t_f_median_s", "rule", "threshold_scale", "fa_per_drone_h", "healthy_drone_h",
+            "runs_per_magnitude"]
+    return view[cols].sort_values(["fault", "detector", "n_drones", "network"]).reset_index(drop=True)
+
+
+def bench_report(rows: pd.DataFrame, out: Path, root: Path) -> list[Path]:
+    from swarmbox.analysis import diagnosis_plots, figures
+
+    fa = detection.false_alarm_rates(rows)
+    fa_healthy = detection.false_alarm_rates(rows, healthy_runs_only=True)
+    det = detection.detection_rates(rows)
+    smallest = detection.smallest_detected(det, fa)
+    written = write_table(rows, out, "bench_runs", markdown=False)
+    written += write_table(fa, out, "false_alarms")
+    written += write_table(fa_healthy, out, "false_alarms_healthy_runs")
+    written += write_table(det, out, "detection_rates")
+    accept = acceptance_table(smallest)
+    written += write_table(accept, out, "smallest_detected")
+    is_default = is_default_setting(rows)
+    fixed = detection.smallest_detected(detection.detection_rates(rows[is_default]),
+                                        detection.false_alarm_rates(rows[is_default]), max_fa=np.inf)
+    written += write_table(acceptance_table(fixed), out, "smallest_detected_default")
+    default = det[is_default_setting(det)]
+    written += figures.save(diagnosis_plots.detection_curves(default, units=UNITS), out, "detection_rate",
+                            formats=("png",))
+    written += figures.save(diagnosis_plots.roc_curves(detection.roc(rows)), out, "roc", formats=("png",))
+    print(to_markdown(accept))
+    return written
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("which", choices=["rq3", "bench"])
+    p.add_argument("root", type=Path)
+    p.add_argument("--out", type=Path, required=True)
+    args = p.parse_args(argv)
+    import matplotlib
+
+    matplotlib.use("Agg")
+    rows = collect(args.root)
+    if rows.empty:
+        print(f"error: no diagnosis.parquet below {args.root}", file=sys.stderr)
+        return 2
+    rows = rows.assign(run=[str(Path(r).relative_to(args.root.resolve()) if Path(r).is_absolute() else
+                                Path(r).relative_to(args.root)) for r in rows["run"]])
+    rows = rows.sort_values(["run", "detector", "rule", "threshold_scale"]).reset_index(drop=True)
+    written = (rq3_report if args.which == "rq3" else bench_report)(rows, args.out, args.root)
+    print(f"{rows['run'].nunique()} runs, {len(written)} files written under {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

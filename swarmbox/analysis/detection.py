@@ -1,0 +1,269 @@
+"""Detection benchmark over many runs: detection rate, false alarms per drone-hour, localization and
+t_f per fault and magnitude, for the swarm-level analyzer and for the per-drone baseline.
+
+:func:`evaluate_run` diagnoses one run under several detector settings (the analyzer never sees the
+fault events) and grades each with :mod:`.scoring`; the other functions are pure reductions of the
+resulting rows (one per run, detector and setting). Everything is deterministic: same runs, same
+tables.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from swarmbox.analysis import diagnosis as dg
+from swarmbox.analysis import network, scoring
+from swarmbox.analysis.load import load_run
+from swarmbox.analysis.unify import T, unify
+
+#: The parameter that is each fault model's magnitude.
+MAGNITUDE = {"gps_drift": "rate_m_s", "gps_bias": "bias_ned_m", "gps_noise": "noise_scale",
+             "latency": "latency_ms", "packet_loss": "loss_prob", "burst_loss": "p_enter_burst"}
+SETTING = ["detector", "rule", "threshold_scale", "persist_ticks"]
+
+
+def magnitude(truth: scoring.Truth | None) -> float:
+    """The fault's magnitude as one number (a vector parameter: its Euclidean norm); NaN when healthy."""
+    if truth is None or truth.name not in MAGNITUDE:
+        return np.nan
+    value = truth.params.get(MAGNITUDE[truth.name])
+    if isinstance(value, list | tuple):
+        return float(np.linalg.norm(np.asarray(value, dtype="float64")))
+    return float(value) if value is not None else np.nan
+
+
+def baseline_alarms(resets: pd.DataFrame, series: dg.Series, opts: dg.DiagnosisOptions) -> pd.DataFrame:
+    """Estimator resets as alarms, each with the drone's largest discrepancy component at that tick
+    and its cross-swarm score (excess over the fence in IQRs, 0 inside): the same ruler as the analyzer's."""
+    rows = []
+    ticks = dg.nearest_tick(resets[T], series.tick_s) if len(resets) else np.array([], dtype="int64")
+    for (t_u, drone), tick in zip(zip(resets[T], resets["drone"], strict=True), ticks, strict=True):
+        i = int(np.searchsorted(series.ticks, tick))
+        j = series.drones.index(int(drone))
+        best = None
+        for metric in dg.DISC:
+            mat = series.values[metric]
+            if i >= len(mat) or not np.isfinite(mat[i, j]):
+                continue
+            scores, med, iqr = dg.outlier_matrix(mat[i:i + 1], 0.0, opts.rule, opts.min_n)
+            dev = abs(mat[i, j] - med[0])
+            if best is None or dev > best[0]:
+                score = float(np.nan_to_num(scores[0, j], nan=0.0, posinf=np.inf))
+                best = (dev, metric, float(mat[i, j]), score, float(med[0]), float(iqr[0]))
+        _, metric, value, score, med, iqr = best or (0.0, "estimator_reset", np.nan, np.nan, np.nan, np.nan)
+        rows.append({T: float(t_u), "metric": metric, "drone": int(drone), "value": value, "score": score,
+                     "median": med, "iqr": iqr, "end_u": float(t_u)})
+    return pd.DataFrame(rows, columns=dg.ALARM_COLUMNS)
+
+
+def evaluate_run(run_dir: str | Path, settings: Sequence[dg.DiagnosisOptions],
+                 grace_s: float = scoring.GRACE_S) -> pd.DataFrame:
+    """One row per detector setting (and one for the estimator baseline) of one run."""
+    run = load_run(run_dir)
+    unify(run)
+    span = dg.scan_span(run, settings[0].stage)
+    series = dg.drone_series(run, settings[0], span)
+    truths = scoring.ground_truth(run.tables["events"])
+    truth = truths[0] if truths else None
+    n = len(run.drones)
+    base = {"run": str(run_dir), "seed": run.manifest.get("seed"), "n_drones": n,
+            "network": run.manifest.get("choices", {}).get("network"),
+            "fault": truth.name if truth else "none", "magnitude": magnitude(truth),
+            "target": truth.target if truth else None, "onset_u": truth.onset_u if truth else np.nan,
+            "scan_s": span[1] - span[0]}
+    if truth is not None and truth.name in ("latency", "packet_loss", "burst_loss"):
+        flow = network.message_flow(run.tables["messages"])
+        base["measured"] = scoring.measured_excess(flow, run.drones, truth)
+    rows = []
+    for opts in settings:
+        alarms = dg.scan(series, opts)
+        first = dg.finding(alarms)
+        rows.append({**base, "detector": "swarmbox", "rule": opts.rule,
+                     "threshold_scale": opts.threshold_scale, "persist_ticks": opts.persist_ticks,
+                     "alarms": len(alarms),
+                     "first_alarm_drone": first.get("drone"), "first_alarm_metric": first.get("metric"),
+                     **scoring.score_alarms(alarms, truth, span, n, grace_s)})
+    resets = baseline_alarms(dg.estimator_alarms(run, span), series, settings[0])
+    rows.append({**base, "detector": "baseline", "rule": "estimator_reset", "threshold_scale": 1.0,
+                 "persist_ticks": 1, "alarms": len(resets),
+                 "first_alarm_drone": int(resets["drone"].iloc[0]) if len(resets) else None,
+                 "first_alarm_metric": "estimator_reset" if len(resets) else None,
+                 **scoring.score_alarms(resets, truth, span, n, grace_s)})
+    return pd.DataFrame(rows)
+
+
+def false_alarm_rates(rows: pd.DataFrame, by: Sequence[str] = ("n_drones", "network"),
+                      healthy_runs_only: bool = False) -> pd.DataFrame:
+    """False alarms per drone-hour of healthy time, per detector setting and ``by`` group."""
+    data = rows[rows["fault"] == "none"] if healthy_runs_only else rows
+    keys = [*SETTING, *by]
+    g = data.groupby(keys, dropna=False)
+    out = g.agg(false_alarms=("false_alarms", "sum"), healthy_drone_h=("healthy_drone_h", "sum"),
+                runs=("run", "count")).reset_index()
+    out["fa_per_drone_h"] = out["false_alarms"] / out["healthy_drone_h"].where(out["healthy_drone_h"] > 0)
+    return out
+
+
+def detection_rates(rows: pd.DataFrame, by: Sequence[str] = ("n_drones", "network")) -> pd.DataFrame:
+    """Per setting, group, fault and magnitude: runs, detection and localization rates, t_f quantiles,
+    mean tau_d and Sigma_a over the detected runs."""
+    data = rows[rows["fault"] != "none"]
+    keys = [*SETTING, *by, "fault", "magnitude"]
+    out = []
+    for key, g in data.groupby(keys, dropna=False, sort=True):
+        hit = g[g["detected"].astype(bool)]
+        tf = hit["t_f_s"].to_numpy(dtype="float64")
+        sig = hit["sigma_a"].to_numpy(dtype="float64")
+        out.append({**dict(zip(keys, key, strict=True)), "runs": len(g), "detected": len(hit),
+                    "detection_rate": len(hit) / len(g),
+                    "localization": float(g["localized"].astype(bool).mean()),
+                    "t_f_median_s": float(np.median(tf)) if tf.size else np.nan,
+                    "t_f_p90_s": float(np.quantile(tf, 0.9)) if tf.size else np.nan,
+                    "tau_d_mean": float(hit["tau_d"].mean()) if len(hit) else np.nan,
+                    "sigma_a_median": float(np.median(sig)) if sig.size else np.nan})
+    return pd.DataFrame(out)
+
+
+def smallest_detected(det: pd.DataFrame, fa: pd.DataFrame, min_rate: float = 0.9, max_fa: float = 1.0,
+                      by: Sequence[str] = ("n_drones", "network")) -> pd.DataFrame:
+    """Per fault and group: the most sensitive setting whose false-alarm rate is <= ``max_fa`` per
+    drone-hour, and the smallest magnitude it detects in >= ``min_rate`` of the runs (NaN: none)."""
+    keys = [*SETTING, *by]
+    ok = fa[fa["fa_per_drone_h"].fillna(np.inf) <= max_fa]
+    merged = det.merge(ok[[*keys, "fa_per_drone_h", "healthy_drone_h"]], on=keys, how="inner")
+    out = []
+    for key, g in merged.groupby(["detector", *by, "fault"], sort=True):
+        best = None
+        for _, s in g.groupby(["rule", "threshold_scale", "persist_ticks"], sort=True):
+            good = s[s["detection_rate"] >= min_rate].sort_values("magnitude")
+            mag = float(good["magnitude"].iloc[0]) if len(good) else np.inf
+            cand = (mag, -s["detection_rate"].mean(), s.iloc[0]["threshold_scale"], s, good)
+            if best is None or cand[:3] < best[:3]:
+                best = cand
+        mag, _, _, s, good = best
+        first = good.iloc[0] if len(good) else s.iloc[0]
+        out.append({**dict(zip(["detector", *by, "fault"], key, strict=True)), "rule": first["rule"],
+                    "threshold_scale": first["threshold_scale"], "fa_per_drone_h": first["fa_per_drone_h"],
+                    "healthy_drone_h": first["healthy_drone_h"],
+                    "smallest_magnitude": mag if np.isfinite(mag) else np.nan,
+                    "detection_rate": first["detection_rate"] if len(good) else np.nan,
+                    "localization": first["localization"] if len(good) else np.nan,
+                    "t_f_median_s": first["t_f_median_s"] if len(good) else np.nan,
+                    "runs_per_magnitude": int(s["runs"].min())})
+    return pd.DataFrame(out)
+
+
+def roc(rows: pd.DataFrame, by: Sequence[str] = ("fault", "magnitude")) -> pd.DataFrame:
+    """Detection rate against false alarms per drone-hour over the threshold settings, per ``by``."""
+    fa = false_alarm_rates(rows, by=())
+    det = detection_rates(rows, by=())
+    det = det.groupby([*SETTING, *by], dropna=False).agg(runs=("runs", "sum"), detected=("detected", "sum"))
+    det = det.reset_index()
+    det["detection_rate"] = det["detected"] / det["runs"]
+    return det.merge(fa[[*SETTING, "fa_per_drone_h"]], on=SETTING, how="left")
+
+
+def default_settings() -> list[dg.DiagnosisOptions]:
+    """The default detector, its threshold swept for ROC curves, and the paper's 2.5 x IQR rule."""
+    return [*(dg.DiagnosisOptions(threshold_scale=s) for s in (0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)),
+            dg.DiagnosisOptions(rule="paper")]
+
+
+def evaluate_sweep(roots: Sequence[Path], settings: Sequence[dg.DiagnosisOptions] | None = None,
+                   n_jobs: int = 1) -> pd.DataFrame:
+    """:func:`evaluate_run` over every run below ``roots`` (runs that cannot be scanned are skipped)."""
+    from joblib import Parallel, delayed
+
+    from swarmbox.analysis.load import find_runs
+
+    settings = list(settings or default_settings())
+    dirs = [d for root in roots for d in find_runs(root)]
+    parts = Parallel(n_jobs=n_jobs)(delayed(_evaluate_or_skip)(d, settings) for d in dirs)
+    parts = [p for p in parts if len(p)]
+    return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
+
+
+def _evaluate_or_skip(run_dir: Path, settings: list[dg.DiagnosisOptions]) -> pd.DataFrame:
+    try:
+        return evaluate_run(run_dir, settings)
+    except ValueError as exc:   # no EXECUTION stage: nothing to scan
+        import logging
+
+        logging.getLogger(__name__).warning("%s", exc)
+        return pd.DataFrame()
+
+
+def write_report(rows: pd.DataFrame, out: Path) -> list[Path]:
+    """Rows, detection rates, false-alarm rates and the smallest detected magnitudes (CSV + Markdown),
+    and the detection-rate and ROC figures."""
+    from swarmbox.analysis import diagnosis_plots, figures
+    from swarmbox.analysis.tables import write_table
+
+    fa = false_alarm_rates(rows)
+    written = write_table(rows, out, "diagnosis_runs", markdown=False) + write_table(fa, out, "false_alarms")
+    if (rows["fault"] != "none").any():
+        det = detection_rates(rows)
+        written += write_table(det, out, "detection_rates")
+        written += write_table(smallest_detected(det, fa), out, "smallest_detected")
+        chosen = (det["threshold_scale"] == 1.0) | (det["detector"] == "baseline")
+        default = det[(det["rule"] != "paper") & chosen]
+        written += figures.save(diagnosis_plots.detection_curves(default), out, "detection_rate")
+        written += figures.save(diagnosis_plots.roc_curves(roc(rows)), out, "roc")
+    return written
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+    import sys
+
+    p = argparse.ArgumentParser(prog="python -m swarmbox.analysis.detection",
+                                description="Onset-agnostic diagnosis of every run below the given "
+                                            "directories, scored against any injected faults.")
+    p.add_argument("paths", nargs="+", type=Path, help="sweep or run directories (searched recursively)")
+    p.add_argument("--out", type=Path, help="output directory (default: <first path>/diagnosis)")
+    p.add_argument("--jobs", type=int, default=2, help="parallel analysis jobs (2)")
+    args = p.parse_args(argv)
+    import matplotlib
+
+    matplotlib.use("Agg")
+    rows = evaluate_sweep(args.paths, n_jobs=args.jobs)
+    if rows.empty:
+        print("error: no run with an EXECUTION stage found", file=sys.stderr)
+        return 2
+    out = args.out or args.paths[0] / "diagnosis"
+    written = write_report(rows, out)
+    print(f"{rows['run'].nunique()} runs, {len(written)} files written under {out}")
+    return 0
+
+
+def _hydra_callback_base() -> type:
+    from hydra.experimental.callback import Callback
+
+    return Callback
+
+
+class DiagnoseSweepCallback(_hydra_callback_base()):
+    """Hydra callback: the diagnosis report of a multirun, in ``<sweep>/diagnosis/``.
+
+    ``group_by`` is accepted and ignored, so that it can take the place of the generic ``analyze``
+    callback. It never raises: a failure is logged.
+    """
+
+    def __init__(self, jobs: int = 2, group_by: Sequence[str] = ()) -> None:
+        self.jobs = jobs
+
+    def on_multirun_end(self, config, **kwargs) -> None:
+        try:
+            main([str(config.hydra.sweep.dir), "--jobs", str(self.jobs)])
+        except Exception:  # noqa: BLE001 - an analysis failure must not fail the multirun
+            import logging
+
+            logging.getLogger(__name__).exception("diagnosis of the sweep failed")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,273 @@
+"""Onset-agnostic fault diagnosis: from the logs alone, is a drone misbehaving, which one, on which
+metric, and since when. Nothing here reads the injected faults; :mod:`.scoring` compares the answer
+with the ground truth afterwards.
+
+Series (:func:`drone_series`). Every monitored metric is put on the run's tick grid. A sample at
+unified time t belongs to the *nearest* tick, round(t / tick): the clock offsets :func:`unify`
+estimates are off by microseconds even when no offset is injected, so a floor with a tiny epsilon
+would drop samples into the previous tick at random. Per drone and tick:
+
+- ``disc_n_m``, ``disc_e_m``, ``disc_d_m``: GNSS - estimate, mean of the drone's state samples;
+- ``latency_ms``: mean latency of the delivered messages it sent or that were sent to it, by the
+  tick of their *receive* time (a latency is known only once the message has arrived);
+- ``loss_ratio``: lost / counted among its messages sent in the trailing ``loss_window_s``
+  (a sliding window evaluated every tick, stamped at its last send tick).
+
+Detection (:func:`scan`), per metric and tick, across *all* drones (cross-sectional, as in the
+paper's section 5.3: the "statistical norm" is the rest of the swarm at that tick):
+
+- ``rule="tukey"`` (default): fences q1 - k IQR and q3 + k IQR with k = 1.5, both tails, and
+  |v - median| >= min deviation (1.5 m, 1 ms, 5 %) times ``threshold_scale``;
+- ``rule="paper"``: the reference's detector, fences at 2.5 IQR, upper tail only, v > the same
+  thresholds (absolute);
+- score = distance beyond the crossed fence in IQRs (+inf when IQR = 0);
+- a (drone, metric) is *in alarm* once flagged on ``persist_ticks`` consecutive ticks; an alarm
+  episode starts at the tick the persistence is reached (the first moment it is known) and lasts
+  while the flags continue. Its value and score are those of that tick.
+
+The scan covers the ground's EXECUTION stage (take-off and landing are manoeuvres every drone makes
+at different times, not a norm to compare against). The diagnosis of a run (:func:`finding`) is its
+first alarm: drone, metric, when (``t_u``), value (tau_d) and score (Sigma_a).
+
+Per-drone baseline (:func:`estimator_alarms`): every estimator position reset a drone logs is an alarm
+for that drone (PX4 EKF2's ``reset_count_pos_ne``, what a single-drone log shows).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from swarmbox.analysis import metrics, network
+from swarmbox.analysis.load import GROUND, RunData
+from swarmbox.analysis.unify import T
+
+DISC = ("disc_n_m", "disc_e_m", "disc_d_m")
+METRICS = (*DISC, "latency_ms", "loss_ratio")
+MIN_DEVIATION = {"disc_n_m": 1.5, "disc_e_m": 1.5, "disc_d_m": 1.5, "latency_ms": 1.0, "loss_ratio": 0.05}
+RULES = {"tukey": 1.5, "paper": 2.5}
+ALARM_COLUMNS = [T, "metric", "drone", "value", "score", "median", "iqr", "end_u"]
+_IQR_EPS = 1e-12
+
+
+@dataclass(frozen=True)
+class DiagnosisOptions:
+    tick_s: float = 0.025
+    loss_window_s: float = 2.5
+    rule: str = "tukey"
+    threshold_scale: float = 1.0
+    persist_ticks: int = 4
+    min_n: int = 3
+    min_deviation: Mapping[str, float] = field(default_factory=dict)   # overrides per metric
+    stage: str = "EXECUTION"
+
+    def __post_init__(self) -> None:
+        if self.rule not in RULES:
+            raise ValueError(f"rule {self.rule!r} is not one of {sorted(RULES)}")
+        if self.persist_ticks < 1 or self.tick_s <= 0 or self.loss_window_s < self.tick_s:
+            raise ValueError("persist_ticks >= 1, tick_s > 0 and loss_window_s >= tick_s are required")
+
+    def threshold(self, metric: str) -> float:
+        return float({**MIN_DEVIATION, **self.min_deviation}[metric]) * self.threshold_scale
+
+
+@dataclass
+class Series:
+    """Metric matrices on the tick grid: ``values[metric]`` has shape (len(ticks), len(drones))."""
+
+    ticks: np.ndarray            # tick indices (t_u = tick * tick_s)
+    drones: list[int]
+    values: dict[str, np.ndarray]
+    tick_s: float
+
+    def times(self) -> np.ndarray:
+        return self.ticks * self.tick_s
+
+    def tidy(self) -> pd.DataFrame:
+        """Long form: t_u, drone, metric, value (NaN cells dropped)."""
+        parts = []
+        for metric, mat in self.values.items():
+            t, d = np.nonzero(np.isfinite(mat))
+            parts.append(pd.DataFrame({T: self.ticks[t] * self.tick_s, "drone": np.asarray(self.drones)[d],
+                                       "metric": metric, "value": mat[t, d]}))
+        if not parts:
+            return pd.DataFrame(columns=[T, "drone", "metric", "value"])
+        return pd.concat(parts, ignore_index=True)
+
+
+def nearest_tick(t_u: np.ndarray | pd.Series, tick_s: float) -> np.ndarray:
+    return np.rint(np.asarray(t_u, dtype="float64") / tick_s).astype("int64")
+
+
+def scan_span(run: RunData, stage: str = "EXECUTION") -> tuple[float, float]:
+    """Unified start and end of the ground's ``stage`` (end: its next stage, or the last record)."""
+    st = run.tables["stages"]
+    ground = st[st["node"] == GROUND].sort_values(T)
+    rows = ground[ground["name"] == stage]
+    if rows.empty:
+        raise ValueError(f"{run.path}: the ground never entered {stage}; nothing to scan")
+    start = float(rows[T].iloc[0])
+    later = ground[ground[T] > start]
+    end = float(later[T].iloc[0]) if len(later) else float(run.tables["state"][T].max())
+    return start, end
+
+
+def _matrix(frame: pd.DataFrame, col: str, ticks: np.ndarray, drones: list[int],
+            how: str = "mean") -> np.ndarray:
+    out = np.full((len(ticks), len(drones)), np.nan)
+    if frame.empty:
+        return out
+    grouped = frame.groupby(["tick", "drone"])[col].agg(how)
+    t_idx = np.searchsorted(ticks, grouped.index.get_level_values(0).to_numpy())
+    d_pos = {d: i for i, d in enumerate(drones)}
+    d_idx = np.array([d_pos[d] for d in grouped.index.get_level_values(1)], dtype="int64")
+    at = grouped.index.get_level_values(0)
+    keep = (t_idx < len(ticks)) & (ticks[np.minimum(t_idx, len(ticks) - 1)] == at)
+    out[t_idx[keep], d_idx[keep]] = grouped.to_numpy()[keep]
+    return out
+
+
+def drone_series(run: RunData, opts: DiagnosisOptions | None = None,
+                 span: tuple[float, float] | None = None) -> Series:
+    """Every monitored metric per drone and tick of the scan span (``run`` must be unified)."""
+    opts = opts or DiagnosisOptions()
+    start, end = span or scan_span(run, opts.stage)
+    ticks = np.arange(nearest_tick([start], opts.tick_s)[0], nearest_tick([end], opts.tick_s)[0] + 1)
+    drones = list(run.drones)
+    disc = metrics.discrepancy(run.tables["state"])
+    disc = disc[disc["node"].isin(drones)].assign(tick=nearest_tick(disc[T], opts.tick_s)).rename(
+        columns={"node": "drone"})
+    values = {m: _matrix(disc, m, ticks, drones) for m in DISC}
+    flow = network.touching(network.message_flow(run.tables["messages"], opts.tick_s))
+    flow = flow[flow["agent"].isin(drones)].rename(columns={"agent": "drone"})
+    got = flow[flow["delivered"]]
+    values["latency_ms"] = _matrix(got.assign(tick=nearest_tick(got["t_recv"], opts.tick_s)), "latency_ms",
+                                   ticks, drones)
+    values["loss_ratio"] = _loss(flow, ticks, drones, opts)
+    return Series(ticks, drones, values, opts.tick_s)
+
+
+def _loss(flow: pd.DataFrame, ticks: np.ndarray, drones: list[int], opts: DiagnosisOptions) -> np.ndarray:
+    """Trailing-window loss ratio per tick: cumulative sums of lost and counted by send tick. A
+    window is only full once the run has sent messages for its whole length: before that (the
+    first seconds of a run) the ratio of a few dozen messages is noise, and is left out."""
+    width = int(round(opts.loss_window_s / opts.tick_s))
+    lo = ticks[0] - width
+    grid = np.arange(lo, ticks[-1] + 1)
+    counted = flow[flow["counted"]].assign(tick=lambda f: nearest_tick(f["t_send"], opts.tick_s))
+    first = int(counted["tick"].min()) if len(counted) else int(ticks[-1]) + 1
+    counted = counted[(counted["tick"] >= lo) & (counted["tick"] <= ticks[-1])]
+    n = np.nan_to_num(_matrix(counted.assign(one=1.0), "one", grid, drones, "sum"))
+    lost = counted.assign(lost_f=counted["lost"].astype("float64"))
+    lost = np.nan_to_num(_matrix(lost, "lost_f", grid, drones, "sum"))
+    cn, cl = np.cumsum(n, axis=0), np.cumsum(lost, axis=0)
+    sel = np.arange(width, len(grid))
+    wn, wl = cn[sel] - cn[sel - width], cl[sel] - cl[sel - width]
+    full = (ticks >= first + width - 1)[:, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where((wn > 0) & full, wl / np.where(wn > 0, wn, 1.0), np.nan)
+
+
+def _row_quantiles(rows: np.ndarray, qs: tuple[float, ...]) -> list[np.ndarray]:
+    """Linear-interpolation quantiles of every row's finite values (``numpy.nanquantile``'s
+    definition, computed with one sort instead of one call per row)."""
+    ordered = np.sort(np.where(np.isfinite(rows), rows, np.inf), axis=1)
+    n = np.isfinite(rows).sum(axis=1)
+    idx = np.arange(len(rows))
+    out = []
+    for q in qs:
+        pos = q * (n - 1)
+        lo = np.floor(pos).astype("int64")
+        hi = np.minimum(lo + 1, n - 1)
+        frac = pos - lo
+        out.append(ordered[idx, lo] + (ordered[idx, hi] - ordered[idx, lo]) * frac)
+    return out
+
+
+def outlier_matrix(mat: np.ndarray, threshold: float, rule: str = "tukey", min_n: int = 3
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per cell: score (NaN when not flagged), and per row the median and IQR across drones."""
+    k = RULES[rule]
+    finite = np.isfinite(mat)
+    enough = finite.sum(axis=1) >= max(min_n, 1)
+    score = np.full(mat.shape, np.nan)
+    med = np.full(len(mat), np.nan)
+    iqr = np.full(len(mat), np.nan)
+    if not enough.any():
+        return score, med, iqr
+    rows = mat[enough]
+    q1, m, q3 = _row_quantiles(rows, (0.25, 0.5, 0.75))
+    spread = q3 - q1
+    hi, lo = (q3 + k * spread)[:, None], (q1 - k * spread)[:, None]
+    if rule == "paper":
+        beyond = np.where(rows > hi, rows - hi, 0.0)
+        gate = rows > threshold
+    else:
+        beyond = np.where(rows > hi, rows - hi, np.where(rows < lo, lo - rows, 0.0))
+        gate = np.abs(rows - m[:, None]) >= threshold
+    flagged = (beyond > 0) & gate & np.isfinite(rows)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        safe = np.where(spread > _IQR_EPS, spread, 1.0)[:, None]
+        s = np.where(spread[:, None] > _IQR_EPS, beyond / safe, np.inf)
+    score[enough] = np.where(flagged, s, np.nan)
+    med[enough], iqr[enough] = m, spread
+    return score, med, iqr
+
+
+def _episodes(flags: np.ndarray, persist: int) -> list[tuple[int, int]]:
+    """(alarm index, last index) of every run of >= ``persist`` consecutive True values."""
+    padded = np.concatenate([[False], flags, [False]]).astype("int8")
+    edges = np.diff(padded)
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    return [(int(a) + persist - 1, int(b) - 1)
+            for a, b in zip(starts, stops, strict=True) if b - a >= persist]
+
+
+def scan(series: Series, opts: DiagnosisOptions | None = None) -> pd.DataFrame:
+    """Every alarm episode: t_u (alarm), metric, drone, value, score, median, iqr, end_u (last flag)."""
+    opts = opts or DiagnosisOptions()
+    rows = []
+    for metric in METRICS:
+        mat = series.values.get(metric)
+        if mat is None:
+            continue
+        score, med, iqr = outlier_matrix(mat, opts.threshold(metric), opts.rule, opts.min_n)
+        for j, drone in enumerate(series.drones):
+            flagged = ~np.isnan(score[:, j])
+            for first, last in _episodes(flagged, opts.persist_ticks):
+                rows.append({T: series.ticks[first] * series.tick_s, "metric": metric, "drone": int(drone),
+                             "value": float(mat[first, j]), "score": float(score[first, j]),
+                             "median": float(med[first]), "iqr": float(iqr[first]),
+                             "end_u": series.ticks[last] * series.tick_s})
+    out = pd.DataFrame(rows, columns=ALARM_COLUMNS)
+    return _ordered(out)
+
+
+def _ordered(alarms: pd.DataFrame) -> pd.DataFrame:
+    """Earliest first; at the same tick the highest score, then the largest deviation, then the lowest id."""
+    dev = (alarms["value"] - alarms["median"]).abs()
+    order = alarms.assign(_dev=dev).sort_values([T, "score", "_dev", "drone", "metric"],
+                                                ascending=[True, False, False, True, True], kind="mergesort")
+    return order.drop(columns="_dev").reset_index(drop=True)
+
+
+def finding(alarms: pd.DataFrame) -> dict:
+    """The run's diagnosis: its first alarm (``detected`` False when there is none)."""
+    if alarms.empty:
+        return {"detected": False}
+    first = alarms.iloc[0]
+    return {"detected": True, "drone": int(first["drone"]), "metric": str(first["metric"]),
+            "t_u": float(first[T]), "value": float(first["value"]), "score": float(first["score"])}
+
+
+def estimator_alarms(run: RunData, span: tuple[float, float]) -> pd.DataFrame:
+    """The per-drone baseline: every estimator position reset inside the span, as an alarm."""
+    ev = run.tables["events"]
+    resets = ev[(ev["kind"] == "estimator") & (ev["name"] == "position_reset") & ev["node"].isin(run.drones)
+                & (ev[T] >= span[0]) & (ev[T] <= span[1])].sort_values([T, "node"])
+    return pd.DataFrame({T: resets[T].to_numpy(dtype="float64"),
+                         "drone": resets["node"].astype("int64").to_numpy(),
+                         "tick": resets["tick"].astype("int64").to_numpy()})

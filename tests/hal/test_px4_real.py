@@ -1,0 +1,75 @@
+"""The px4 bridge against real PX4 SITL (SIH) instances: CI's real-PX4 job (``.ci/px4.sh``).
+
+Skipped unless a PX4 build is found (``SWARMBOX_PX4_BUILD``, else ``../shared/px4-sitl`` next to the
+repository). PX4 runs at ``PX4_SIM_SPEED`` (default 2) times real time while the drivers keep the wall
+clock, so every check is done that many times sooner. A bridge that breaks (a wrong type mask, a wrong
+frame, a command PX4 refuses) fails the conformance checks: the vehicle does not follow.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+import pytest
+
+from swarmbox.hal.px4.backend import Px4Backend
+from swarmbox.hal.px4.sitl import resolve_build
+from swarmbox.testing import BACKEND_CHECKS
+from tests.conftest import table
+
+BUILD = resolve_build("auto")
+SPEED = float(os.environ.get("PX4_SIM_SPEED", "2"))
+if BUILD is None and os.environ.get("SWARMBOX_REQUIRE_PX4"):
+    raise RuntimeError("SWARMBOX_REQUIRE_PX4 is set but no PX4 SITL build was found")
+pytestmark = [pytest.mark.slow,
+              pytest.mark.skipif(BUILD is None, reason="no PX4 SITL build: set SWARMBOX_PX4_BUILD "
+                                 "(see docs/px4.md)")]
+
+
+def px4_fleet(homes, **kw) -> Px4Backend:
+    kw.setdefault("speed", SPEED)
+    return Px4Backend(homes_ned_m=list(homes), tick_s=0.025, rng=np.random.default_rng(1),
+                      px4_build=str(BUILD), sitl={"logger": False, "start_stagger_s": 0.1}, **kw)
+
+
+@pytest.mark.parametrize("check", BACKEND_CHECKS, ids=lambda c: c.__name__)
+def test_conformance_on_px4(check):
+    check(px4_fleet)
+
+
+def test_formation_on_four_px4_instances(run):
+    """The default 4-drone formation flies to ``ok`` on real PX4, faster than real time."""
+    manifest, d = run("backend=px4", f"backend.px4_build={BUILD}", f"run.speed={SPEED:g}",
+                      "backend.sitl.logger=false", name="px4formation")
+    assert manifest["status"] == "ok", manifest["reason"] or manifest["traceback"]
+    assert manifest["real_time_factor"] > 0.8 * SPEED * 0.5   # the run loop kept up with PX4
+    for i in range(4):
+        st = table(d, f"drone_{i}", "state")
+        assert st["pos_d"].min() < -2.0, f"drone {i} never climbed"
+        assert not st.iloc[-1]["armed"] and st.iloc[-1]["landed"], f"drone {i} did not land"
+        sp = table(d, f"drone_{i}", "setpoints")
+        assert len(sp) and math.isfinite(sp["n"].iloc[-1])
+
+
+def test_leader_px4_killed_followers_hand_over_and_finish(run):
+    """Killing the leader's PX4 instance: its drone loses the link and aborts, the followers hand
+    over to the next successor (the ground) and the mission completes with three drones."""
+    def kill_leader(swarm) -> None:
+        swarm.backend.launcher.procs[0].kill()
+
+    manifest, d = run("backend=px4", f"backend.px4_build={BUILD}", f"run.speed={SPEED:g}",
+                      "backend.sitl.logger=false", "topology=leader_follower", name="px4leader",
+                      prepare=lambda s: s.schedule(30.0, kill_leader))
+    stages = table(d, "drone_0", "stages")
+    assert stages["name"].iloc[-1] == "ABORT" and stages["reason"].iloc[-1] == "link to the autopilot lost"
+    for follower in (1, 2, 3):
+        ev = table(d, f"drone_{follower}", "events")
+        assert "superior_aborted" in set(ev["name"]), f"drone {follower} did not see its leader abort"
+        handover = ev[ev["name"] == "handover"]
+        assert len(handover) == 1 and 30.0 < handover["t_s"].iloc[0] < 36.0
+        assert table(d, f"drone_{follower}", "stages")["name"].iloc[-1] == "TERMINATION"
+        last = table(d, f"drone_{follower}", "state").iloc[-1]
+        assert last["landed"] and not last["armed"], f"drone {follower} did not land"
+    assert "drones [0] aborted" in manifest["reason"] or "drone 0 link lost" in manifest["reason"], manifest

@@ -1,0 +1,81 @@
+"""Sweeps as a user runs them: progress with ETA, resume, and the Ray and Submitit launchers.
+
+Real subprocesses of the command line; Ray starts a local cluster (127.0.0.1, no dashboard) and
+Submitit runs its local executor, so the remote-launcher code paths run on any machine.
+"""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import pandas as pd
+import pytest
+
+from tests.conftest import ROOT
+
+HOVER = ("algo=hover", "algo.params.hover_s=1", "mission.max_sim_time_s=60")
+
+
+def swarmbox_run(*args, cwd=ROOT, timeout=600):
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "RAY_USAGE_STATS_ENABLED": "0"}
+    return subprocess.run([sys.executable, "-m", "swarmbox.cli", "run", *args], cwd=cwd, capture_output=True,
+                          text=True, timeout=timeout, env=env)
+
+
+def statuses(sweep_dir):
+    return {p.parent.name: json.loads(p.read_text())["status"] for p in sweep_dir.glob("*/run.json")}
+
+
+@pytest.mark.slow
+def test_sweep_shows_progress_and_resume_flies_only_the_rest(tmp_path):
+    sweep = tmp_path / "study"
+    args = ("-m", *HOVER, "seed=range(4)", f"hydra.sweep.dir={sweep}", "~hydra.callbacks.analyze")
+    first = swarmbox_run(*args)
+    assert first.returncode == 0, first.stderr[-3000:]
+    assert "4/4 runs done, 0 failed" in first.stderr and "ETA" in first.stderr
+    kept = {d: (sweep / d / "run.json").read_bytes() for d in ("0", "1")}
+    shutil.rmtree(sweep / "2")                                  # never flown (interrupted before it)
+    (sweep / "3" / "run.json").write_text(json.dumps({"status": "failed", "overrides": []}))  # cut short
+    again = swarmbox_run(*args, "run.resume=true")
+    assert again.returncode == 0, again.stderr[-3000:]
+    assert again.stdout.count("SKIP") == 2 and again.stdout.count("OK ") == 2
+    assert "2/2 runs done, 0 failed, 2 skipped" in again.stderr
+    assert {d: (sweep / d / "run.json").read_bytes() for d in kept} == kept
+    assert statuses(sweep) == {"0": "ok", "1": "ok", "2": "ok", "3": "ok"}
+    assert (sweep / "3" / "run.failed-1.json").is_file()
+
+
+def comparable(table: pd.DataFrame) -> pd.DataFrame:
+    """A summary without the machine figures (wall time, real-time factor differ run to run)."""
+    return table[table["kind"] != "machine"].reset_index(drop=True)
+
+
+@pytest.mark.slow
+def test_ray_launcher_gives_the_same_tables_as_joblib(tmp_path):
+    pytest.importorskip("hydra_plugins.hydra_ray_launcher", reason="needs pip install -e '.[ray]'")
+    common = ("-m", *HOVER, "seed=range(4)")
+    joblib = swarmbox_run(*common, "hydra/launcher=joblib", "hydra.launcher.n_jobs=2",
+                          f"hydra.sweep.dir={tmp_path / 'joblib'}")
+    assert joblib.returncode == 0, joblib.stderr[-3000:]
+    ray = swarmbox_run(*common, "hydra/launcher=ray", "+hydra.launcher.ray.init.num_cpus=2",
+                       "+hydra.launcher.ray.init.include_dashboard=false",
+                       f"hydra.sweep.dir={tmp_path / 'ray'}")
+    assert ray.returncode == 0, ray.stderr[-3000:]
+    assert "Ray Launcher is launching 4 jobs" in ray.stderr + ray.stdout
+    a = pd.read_csv(tmp_path / "joblib" / "tables" / "summary.csv")
+    b = pd.read_csv(tmp_path / "ray" / "tables" / "summary.csv")
+    assert len(comparable(a)) > 10
+    pd.testing.assert_frame_equal(comparable(a), comparable(b))
+
+
+@pytest.mark.slow
+def test_submitit_local_executor_flies_the_sweep(tmp_path):
+    pytest.importorskip("hydra_plugins.hydra_submitit_launcher", reason="needs pip install -e '.[slurm]'")
+    proc = swarmbox_run("-m", *HOVER, "seed=0,1", "hydra/launcher=submitit_local",
+                        "hydra.launcher.timeout_min=10", f"hydra.sweep.dir={tmp_path / 'sub'}",
+                        "~hydra.callbacks.analyze")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert statuses(tmp_path / "sub") == {"0": "ok", "1": "ok"}
+    assert (tmp_path / "sub" / ".submitit").is_dir()             # the jobs went through submitit

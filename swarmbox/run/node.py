@@ -115,6 +115,8 @@ class NodeProcess:
                       params=typed_params(cfg.algo),
                       rng=build.rng_for(seed, f"algo/{self.name}"))
         self.backend = None
+        if os.environ.get("SWARMBOX_MAVLINK_KEY"):   # set by the launcher from backend.signing_key
+            cfg.backend.signing_key = os.environ["SWARMBOX_MAVLINK_KEY"]   # MAVLink 2 signing of the link
         vehicle = plan.get("vehicles", {}).get(self.name)
         if vehicle:   # an autopilot the launcher started: connect to it like to a real vehicle
             cfg.backend.update(px4_build=None, wait_ready=True, **vehicle)

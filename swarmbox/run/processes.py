@@ -31,6 +31,8 @@ from swarmbox.record.schema import SCHEMA_VERSION, node_name
 from swarmbox.run import build, mission, node_faults
 
 _PACKAGE_ROOT = Path(__file__).resolve().parents[2]
+#: The MAVLink 2 signing key of the vehicle links (``backend.signing_key``), handed to agent processes.
+MAVLINK_KEY_ENV = "SWARMBOX_MAVLINK_KEY"
 POLL_S = 0.2
 
 
@@ -92,14 +94,15 @@ class NodeSet:
         self.ids = [GROUND_ID, *drone_ids]
         self.procs: dict[int, subprocess.Popen[bytes]] = {}
 
-    def start(self, key: str, vehicles: dict[str, dict[str, Any]]) -> None:
+    def start(self, secrets_env: dict[str, str], vehicles: dict[str, dict[str, Any]]) -> None:
         self.nodes_dir.mkdir(parents=True, exist_ok=True)
         ports = free_ports(len(self.ids))
         locators = {node_name(i): f"tcp/127.0.0.1:{p}" for i, p in zip(self.ids, ports, strict=True)}
         plan = {"mission_id": secrets.token_hex(6), "locators": locators, "vehicles": vehicles}
         (self.nodes_dir / "plan.json").write_text(json.dumps(plan, indent=2))
         env = dict(os.environ)
-        env[self.cfg.run.net.key_env] = key
+        env.pop(MAVLINK_KEY_ENV, None)
+        env.update(secrets_env)
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(_PACKAGE_ROOT), env.get("PYTHONPATH")]))
         for i in self.ids:
             role = ["ground"] if i == GROUND_ID else ["agent", "--drone", str(i)]
@@ -198,7 +201,11 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         raise RunExistsError(f"{run_dir} already holds a finished run; refusing to overwrite it")
     key = cfg.run.net.key or os.environ.get(cfg.run.net.key_env) or secrets.token_hex(32)
     public = OmegaConf.to_container(cfg, resolve=True)
-    public["run"]["net"]["key"] = None          # the key travels in the environment only
+    public["run"]["net"]["key"] = None          # the keys travel in the environment only
+    secrets_env = {cfg.run.net.key_env: key}
+    if isinstance(public.get("backend"), dict) and public["backend"].get("signing_key"):
+        secrets_env[MAVLINK_KEY_ENV] = str(public["backend"]["signing_key"])
+        public["backend"]["signing_key"] = None
     write_atomic(run_dir / "config.yaml", OmegaConf.to_yaml(OmegaConf.create(public)))
     manifest: dict[str, Any] = {
         "schema": SCHEMA_VERSION, "status": "failed", "reason": "", "traceback": None, "runtime": "processes",
@@ -215,7 +222,7 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         manifest.update(n_drones=m.swarm_size, nodes=[node_name(i) for i in [GROUND_ID, *m.drone_ids]])
         nodes = NodeSet(cfg, run_dir, list(m.drone_ids))
         sitl, vehicles = autopilots(cfg, m, run_dir)
-        nodes.start(key, vehicles)
+        nodes.start(secrets_env, vehicles)
         nodes.wait_ready(float(cfg.run.net.ready_timeout_s))
         start = nodes.go(float(cfg.run.net.start_delay_s))
         nodes.wait_ground()

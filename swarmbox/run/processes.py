@@ -33,6 +33,8 @@ from swarmbox.run import build, mission, node_faults
 _PACKAGE_ROOT = Path(__file__).resolve().parents[2]
 #: The MAVLink 2 signing key of the vehicle links (``backend.signing_key``), handed to agent processes.
 MAVLINK_KEY_ENV = "SWARMBOX_MAVLINK_KEY"
+#: Config keys whose values never reach a file: the swarm key and the MAVLink signing key.
+SECRET_KEYS = frozenset({"key", "signing_key"})
 POLL_S = 0.2
 
 
@@ -192,6 +194,15 @@ def outcome(results: dict[str, dict[str, Any]]) -> tuple[str, str]:
     return status, "; ".join(p for p in parts if p)
 
 
+def redact(overrides: list[str]) -> list[str]:
+    """Command-line overrides with the value of every key setting hidden (``run.net.key=***``)."""
+    out = []
+    for o in overrides:
+        name, eq, _ = o.partition("=")
+        out.append(f"{name}=***" if eq and name.lstrip("+~").rsplit(".", 1)[-1] in SECRET_KEYS else o)
+    return out
+
+
 def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: list[str]) -> dict[str, Any]:
     """Run ``cfg`` as one process per node; returns the manifest written as ``run.json``."""
     from swarmbox.run.runner import RunExistsError, _git_sha, _versions, write_atomic
@@ -209,7 +220,7 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
     write_atomic(run_dir / "config.yaml", OmegaConf.to_yaml(OmegaConf.create(public)))
     manifest: dict[str, Any] = {
         "schema": SCHEMA_VERSION, "status": "failed", "reason": "", "traceback": None, "runtime": "processes",
-        "seed": int(cfg.seed), "choices": choices, "overrides": overrides, "sim_time_s": 0.0,
+        "seed": int(cfg.seed), "choices": choices, "overrides": redact(overrides), "sim_time_s": 0.0,
         "wall_time_s": 0.0, "real_time_factor": None, "ticks": 0, "tick_s": 1.0 / cfg.run.tick_hz,
         "n_drones": 0, "nodes": [], "clocks": build.clock_settings(cfg), "node_results": {},
         "versions": _versions(), "git_sha": _git_sha(),

@@ -11,7 +11,7 @@ import pytest
 from omegaconf import OmegaConf
 
 from swarmbox.run.node import NodeSetupError, heartbeat_subscribers, mission_key
-from swarmbox.run.processes import free_ports, outcome
+from swarmbox.run.processes import free_ports, outcome, redact
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -78,3 +78,8 @@ def test_a_fleet_fault_is_refused_before_any_process_starts(tmp_path):
     assert "gps_drift cannot run with run.runtime=processes" in manifest["reason"]
     assert not (tmp_path / "nodes").exists()
     assert "key: null" in (tmp_path / "config.yaml").read_text()
+
+
+def test_keys_given_on_the_command_line_are_not_recorded():
+    assert redact(["run.net.key=abc", "+backend.signing_key=pass", "seed=3", "run.net.key_env=X"]) == [
+        "run.net.key=***", "+backend.signing_key=***", "seed=3", "run.net.key_env=X"]

@@ -170,9 +170,23 @@ def _track(rows: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, str]:
     return rows["pos_e"].to_numpy(dtype="float64"), rows["pos_n"].to_numpy(dtype="float64"), "estimated"
 
 
+#: Above this many drones a per-drone line and legend entry stops helping; figures summarize instead.
+MANY_DRONES = 30
+#: Tracks drawn on top of the density when the swarm is large.
+SAMPLED_TRACKS = 12
+
+
 def trajectories(state: pd.DataFrame, *, ax: Axes | None = None) -> Figure:
-    """Every drone's horizontal path (x = East, y = North, equal axes), start marked with its id."""
+    """Every drone's horizontal path (x = East, y = North, equal axes), start marked with its id.
+
+    Above :data:`MANY_DRONES` drones: a log-scaled density of every position sample, every start as
+    a dot, and :data:`SAMPLED_TRACKS` evenly chosen drones' tracks — readable at 1,000 drones, and
+    the heavy layers are rasterized so an SVG stays small.
+    """
     fig, ax = _axes(ax)
+    drones = np.sort(state["node"].unique())
+    if len(drones) > MANY_DRONES:
+        return _trajectory_density(state, drones, fig, ax)
     sources = set()
     for drone, rows in state.sort_values(T).groupby("node", sort=True):
         east, north, source = _track(rows)
@@ -190,14 +204,39 @@ def trajectories(state: pd.DataFrame, *, ax: Axes | None = None) -> Figure:
     return fig
 
 
+def _trajectory_density(state: pd.DataFrame, drones: np.ndarray, fig: Figure, ax: Axes) -> Figure:
+    east, north, source = _track(state)
+    ok = np.isfinite(east) & np.isfinite(north)
+    if ok.any():
+        hb = ax.hexbin(east[ok], north[ok], gridsize=120, bins="log", cmap="Greys", mincnt=1, linewidths=0)
+        hb.set_rasterized(True)
+        fig.colorbar(hb, ax=ax, label="samples (log)")
+    e0, n0, _ = _track(state.sort_values(T).groupby("node", sort=True).head(1))
+    ax.scatter(e0, n0, s=4, color="tab:blue", label=f"start ({len(drones)} drones)", rasterized=True)
+    chosen = np.unique(drones[np.linspace(0, len(drones) - 1, SAMPLED_TRACKS).round().astype(int)])
+    for drone in chosen:
+        e, n, _ = _track(state[state["node"] == drone].sort_values(T))
+        ax.plot(e, n, lw=0.9, color="tab:orange", alpha=0.9)
+    ax.plot([], [], color="tab:orange", label=f"{len(chosen)} sampled tracks")
+    ax.set_xlabel("East (m)")
+    ax.set_ylabel("North (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(loc="upper right", fontsize="small")
+    ax.set_title(f"Horizontal paths of {len(drones)} drones ({source} positions; density + sampled tracks)")
+    return fig
+
+
 def timeline(frame: pd.DataFrame, *, metric: str, onset: float | None = None, detection: float | None = None,
              target: int | None = None, ax: Axes | None = None) -> Figure:
     """One metric per drone over unified time, with the fault onset and the first detection marked."""
     fig, ax = _axes(ax, (8.0, 4.0))
     data = frame[frame["metric"] == metric]
-    for drone, rows in data.groupby("drone", sort=True):
-        ax.plot(rows[T], rows["value"], lw=2.0 if drone == target else 1.0,
-                label=f"drone {drone}" + (" (target)" if drone == target else ""))
+    if data["drone"].nunique() > MANY_DRONES:
+        _band(data, ax, target)
+    else:
+        for drone, rows in data.groupby("drone", sort=True):
+            ax.plot(rows[T], rows["value"], lw=2.0 if drone == target else 1.0,
+                    label=f"drone {drone}" + (" (target)" if drone == target else ""))
     if onset is not None:
         ax.axvline(onset, color="red", ls="--", label="fault onset")
     if detection is not None:
@@ -208,6 +247,17 @@ def timeline(frame: pd.DataFrame, *, metric: str, onset: float | None = None, de
     ax.set_title(f"{name[0].upper()}{name[1:]} per drone")
     ax.legend(loc="best", fontsize="small")
     return fig
+
+
+def _band(data: pd.DataFrame, ax: Axes, target: int | None) -> None:
+    """Many drones: the median over drones per window, the 5-95 % band, the extremes, the target."""
+    q = data.groupby(T)["value"].quantile([0.0, 0.05, 0.5, 0.95, 1.0]).unstack()
+    ax.fill_between(q.index, q[0.0], q[1.0], color="tab:blue", alpha=0.12, lw=0, label="min-max")
+    ax.fill_between(q.index, q[0.05], q[0.95], color="tab:blue", alpha=0.3, lw=0, label="5-95 %")
+    ax.plot(q.index, q[0.5], color="tab:blue", lw=1.2, label=f"median of {data['drone'].nunique()} drones")
+    if target is not None:
+        rows = data[data["drone"] == target]
+        ax.plot(rows[T], rows["value"], color="tab:red", lw=1.5, label=f"drone {target} (target)")
 
 
 #: Timeline metrics (:data:`swarmbox.analysis.timeline.MONITORED`): readable name and unit.

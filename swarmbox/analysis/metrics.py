@@ -17,8 +17,9 @@ Per drone:
 Across drones: mean and population standard deviation (ddof 0) of the per-drone values.
 Safety and swarm metrics align drones on the run's global ``tick``:
 - separation at a tick = smallest 3-D distance over drone pairs (truth if every drone has it, else the
-  estimate); ``min_separation_m`` its minimum over the window; ``time_below_separation_s`` = ticks
-  with separation < threshold x tick length;
+  estimate; nearest neighbours from a k-d tree, never an N x N matrix); ``min_separation_m`` its
+  minimum over the window; ``time_below_separation_s`` = ticks with separation < threshold x tick
+  length;
 - order at a tick = |sum_i v_i| / sum_i |v_i| over the drones' estimated 3-D velocities (NaN when
   the swarm is at rest); ``order_mean`` its mean over the window;
 - collision and safety events are counted over the whole run: a collision matters whenever it happens.
@@ -30,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+from scipy.spatial import cKDTree
 
 from swarmbox.analysis.load import GROUND
 from swarmbox.analysis.unify import T
@@ -84,8 +86,15 @@ def path_length(rows: pd.DataFrame) -> tuple[float, float, str]:
 
 def completion_time(events: pd.DataFrame, drone: int) -> float:
     """Start of the drone's final complete streak (NaN if it never completed or flipped back last)."""
-    mine = events[(events["node"] == drone) & (events["kind"] == "progress")
-                  & events["name"].isin(["exec_complete", "exec_incomplete"])].sort_values(T)
+    return _completion(events[events["node"] == drone])
+
+
+def _progress_events(events: pd.DataFrame) -> pd.DataFrame:
+    return events[(events["kind"] == "progress") & events["name"].isin(["exec_complete", "exec_incomplete"])]
+
+
+def _completion(mine: pd.DataFrame) -> float:
+    mine = _progress_events(mine).sort_values(T)
     if mine.empty or mine["name"].iloc[-1] != "exec_complete":
         return np.nan
     last_incomplete = mine.loc[mine["name"] == "exec_incomplete", T]
@@ -97,11 +106,17 @@ def completion_time(events: pd.DataFrame, drone: int) -> float:
 
 def drone_workload(state: pd.DataFrame, events: pd.DataFrame, drones: list[int],
                    window: ExecWindow) -> pd.DataFrame:
-    """Per drone: path lengths, completion, busy, utilization, idle (columns documented above)."""
+    """Per drone: path lengths, completion, busy, utilization, idle (columns documented above).
+
+    State and events are grouped by node once (not filtered once per drone): linear in the rows.
+    """
+    inside = dict(tuple(within(state, window).groupby("node", sort=False)))
+    progress = dict(tuple(_progress_events(events).groupby("node", sort=False)))
+    empty_state, empty_events = state.iloc[0:0], events.iloc[0:0]
     rows = []
     for drone in drones:
-        dist_h, dist_3d, source = path_length(within(state[state["node"] == drone], window))
-        t_done = completion_time(events, drone)
+        dist_h, dist_3d, source = path_length(inside.get(drone, empty_state))
+        t_done = _completion(progress.get(drone, empty_events))
         busy = window.duration
         if not np.isnan(t_done):
             busy = float(np.clip(t_done - window.start, 0, window.duration))
@@ -153,22 +168,32 @@ def _by_tick(state: pd.DataFrame, cols: list[str], drones: list[int]) -> tuple[n
     return ticks, out
 
 
+def nearest_gap(pos: np.ndarray) -> float:
+    """Smallest distance between two of the rows of ``pos`` (rows with a NaN left out; NaN below 2).
+
+    A k-d tree answers each point's nearest neighbour in O(N log N), so a tick of 1,000 drones costs
+    a few milliseconds and no N x N matrix is ever built.
+    """
+    pos = pos[np.isfinite(pos).all(axis=1)]
+    if len(pos) < 2:
+        return np.nan
+    dist, _ = cKDTree(pos).query(pos, k=2)
+    return float(dist[:, 1].min())
+
+
 def separation_by_tick(state: pd.DataFrame, drones: list[int]) -> pd.Series:
     """Smallest pairwise 3-D distance between drones at every tick (NaN with fewer than 2 drones)."""
     state = state.drop_duplicates(["node", "tick"], keep="last")
     truth = state[["true_n", "true_e", "true_d"]].to_numpy(dtype="float64")
     has_truth = len(truth) and np.isfinite(truth).all()
     cols = ["true_n", "true_e", "true_d"] if has_truth else ["pos_n", "pos_e", "pos_d"]
-    ticks, pos = _by_tick(state, cols, drones)
+    ticks = np.sort(state["tick"].unique())
     if len(drones) < 2 or len(ticks) == 0:
         return pd.Series(np.nan, index=ticks, dtype="float64")
-    diff = pos[:, :, None, :] - pos[:, None, :, :]
-    dist = np.linalg.norm(diff, axis=-1)
-    iu = np.triu_indices(len(drones), k=1)
-    pairs = dist[:, iu[0], iu[1]]
-    with np.errstate(all="ignore"):
-        best = np.where(np.isfinite(pairs).any(axis=1), np.nanmin(np.where(np.isfinite(pairs), pairs, np.inf),
-                                                                    axis=1), np.nan)
+    state = state[state["node"].isin(drones)].sort_values("tick", kind="stable")
+    pos = state[cols].to_numpy(dtype="float64")
+    bounds = np.searchsorted(state["tick"].to_numpy(), ticks, side="left").tolist() + [len(state)]
+    best = [nearest_gap(pos[lo:hi]) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
     return pd.Series(best, index=ticks, dtype="float64")
 
 

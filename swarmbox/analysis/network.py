@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+from scipy.sparse.csgraph import connected_components
 
 from swarmbox.analysis.load import NET
 from swarmbox.analysis.unify import T
@@ -121,6 +122,8 @@ def algebraic_connectivity(nodes: list[int], edges: set[tuple[int, int]]) -> flo
     for a, b in edges:
         if a in index and b in index and a != b:
             adj[index[a], index[b]] = adj[index[b], index[a]] = 1.0
+    if connected_components(adj, directed=False, return_labels=False) > 1:
+        return 0.0   # no eigen-solve needed (it is O(N^3))
     laplacian = np.diag(adj.sum(axis=1)) - adj
     eig = np.linalg.eigvalsh(laplacian)
     return float(max(eig[1], 0.0))
@@ -137,8 +140,12 @@ def connectivity_timeline(flow: pd.DataFrame, nodes: list[int], window_s: float)
                           "b": np.maximum(got["src"], got["dst"])}).drop_duplicates()
     rows = []
     grouped = dict(tuple(pairs.groupby("w")))
+    known: dict[frozenset, float] = {}   # a swarm's graph rarely changes: solve each graph once
     for win in range(int(w.min()), int(w.max()) + 1):
         part = grouped.get(win)
-        edges = set(zip(part["a"], part["b"], strict=True)) if part is not None else set()
-        rows.append({T: (win + 1) * window_s, "connectivity": algebraic_connectivity(nodes, edges)})
+        edges = frozenset(zip(part["a"].tolist(), part["b"].tolist(), strict=True)) if part is not None \
+            else frozenset()
+        if edges not in known:
+            known[edges] = algebraic_connectivity(nodes, set(edges))
+        rows.append({T: (win + 1) * window_s, "connectivity": known[edges]})
     return pd.DataFrame(rows)

@@ -3,7 +3,8 @@
 Run: ``<run>/tables/`` holds metrics (long: metric, value, direction, unit), drones, links, agents,
 clocks, diagnosis, anomalies (every flag), timeline (per drone and window), swarm (per tick),
 connectivity (per window), markers, problems; ``<run>/figures/`` holds trajectories,
-one timeline per monitored metric, and the communication graph.
+one timeline per monitored metric, and the communication graph (up to ``figures.MANY_DRONES``
+drones; larger swarms get density/summary figures instead of one line per drone).
 Sweep: ``<sweep>/tables/`` holds runs, summary (long, the input of ``compare``), summary_wide,
 paired, ranks, problems; ``<sweep>/figures/`` holds the normalized heatmap and the box plots.
 """
@@ -73,7 +74,8 @@ def _run_figures(analysis: RunAnalysis, out: Path) -> list[Path]:
         fig = figures.timeline(analysis.timeline, metric=metric, onset=onset.t_u if onset else None,
                                detection=detection, target=onset.target if onset else None)
         written += figures.save(fig, out, f"timeline_{metric}")
-    if len(analysis.links):
+    if len(analysis.links) and len(analysis.run.drones) <= figures.MANY_DRONES:
+        # one labelled edge per link: unreadable past a few dozen drones (tables/links.csv has it all)
         written += figures.save(figures.comm_graph(analysis.links), out, "comm_graph")
     return written
 

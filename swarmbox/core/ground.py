@@ -13,6 +13,7 @@ drones remain, instead of stalling.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -25,10 +26,6 @@ from swarmbox.core.stages import TERMINAL, Stage
 _ZERO3 = (0.0, 0.0, 0.0)
 
 
-#: Up to this many drones, close pairs are found directly; beyond, with a k-d tree (scipy).
-_DIRECT_PAIRS_MAX = 24
-
-
 class GroundNode(Node):
     def __init__(self, algorithm: GroundAlgorithm, **kw) -> None:
         super().__init__(GROUND_ID, **kw)
@@ -36,8 +33,8 @@ class GroundNode(Node):
         self.ctx = GroundContext(self)
         self.reason = ""
         self._satisfied = True   # the ground algorithm's *_complete verdict on its latest loop tick
-        if self.mission.swarm_size > _DIRECT_PAIRS_MAX:
-            import scipy.spatial  # noqa: F401  (now, so that the first tick does not pay for the import)
+        if self.mission.swarm_size > _DIRECT_PAIRS_UP_TO:
+            _kd_tree()   # load scipy now, not inside the first timed tick
 
     # -- the tick -------------------------------------------------------------------------------
     def tick(self) -> None:
@@ -131,13 +128,22 @@ class GroundNode(Node):
                                         tuple(others)), drone_id)
 
 
+_DIRECT_PAIRS_UP_TO = 24   # drones; above, proximity pairs come from a k-d tree
+
+
+@functools.cache
+def _kd_tree() -> type:
+    """scipy's cKDTree, imported on first use: small swarms never need it, so runs start faster."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree
+
+
 def _close_pairs(view: tuple[DescendantState, ...], limit_m: float) -> list[tuple[int, int]]:
     """Index pairs closer than ``limit_m`` (3-D): direct for small swarms, a k-d tree for large."""
-    if len(view) <= _DIRECT_PAIRS_MAX:
+    if len(view) <= _DIRECT_PAIRS_UP_TO:
         return [(a, b) for a in range(len(view)) for b in range(a + 1, len(view))
                 if math.dist(view[a].pos_ned_m, view[b].pos_ned_m) < limit_m]
-    from scipy.spatial import cKDTree  # not at the top: an agent process must not load scipy
-
     pts = np.array([d.pos_ned_m for d in view])
-    pairs = cKDTree(pts).query_pairs(limit_m, output_type="ndarray")
+    pairs = _kd_tree()(pts).query_pairs(limit_m, output_type="ndarray")
     return sorted(map(tuple, pairs.tolist()))

@@ -116,7 +116,7 @@ class Swarm:
         start = wall.perf_counter()
         realtime = bool(getattr(self.backend, "realtime", False))
         max_ticks = int(round(max_sim_time_s / self.tick_s))
-        report_every = max(1, int(round(10.0 / self.tick_s)))
+        report_every = max(1, int(round(1.0 / self.tick_s)))   # once per simulated second
         while not self.done() and self.time.tick < max_ticks:
             self.step()
             if realtime:

@@ -1,141 +1,217 @@
-"""Buffered, atomic Parquet writers for per-node logs.
+"""Per-node logs of one run, written off the tick thread.
 
-Nodes append plain tuples (the fastest thing Python can do in the tick loop); the recorder turns
-them into columns and writes them as Parquet row groups in the background of the run — every
-``flush_rows`` rows and at the end. A file is written as ``<table>.parquet.partial`` and renamed to
-``<table>.parquet`` only once complete, so a reader never sees half a file under the final name;
-on failure the run still closes (and renames) everything it has, so partial logs survive.
+The tick loop only appends tuples to per-node lists. Once ``flush_rows`` rows are buffered (the
+runner checks once per simulated second, so the check costs nothing per row) the recorder *hands the
+lists over*: it copies their contents into one chunk per table and empties them, which is a pointer
+copy. A background thread turns each chunk — all nodes at once — into one Arrow batch and appends it
+as a row group to a run-wide spill file ``<run>/.spill/<table>.parquet`` (rows carry a ``node``
+column). The loop never waits for disk, only for a full hand-over queue (bounded memory).
+
+At the end the spill files are cut into the per-node layout of :mod:`swarmbox.record.schema`,
+``logs/<node>/<table>.parquet``: each node's rows of a row group are contiguous (chunks are built
+node by node), so the cut is zero-copy slicing. Every file is written as ``*.partial`` and renamed
+once complete, so a reader never sees half a file under its final name; on failure the run still
+closes everything it has, so partial logs survive.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+import queue
+import shutil
+import threading
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from swarmbox.record.schema import SCHEMA_VERSION, TABLES, node_name
+from swarmbox.record.columns import arrow_schema, batch, spill_schema
+from swarmbox.record.schema import node_name
 
-_TYPES = {"float64": pa.float64(), "int64": pa.int64(), "int32": pa.int32(), "int16": pa.int16(),
-          "int8": pa.int8(), "bool": pa.bool_(), "string": pa.string()}
-
-
-def arrow_schema(table: str) -> pa.Schema:
-    cols = TABLES[table]
-    fields = [pa.field(c.name, _TYPES[c.dtype], metadata={"unit": c.unit, "doc": c.doc}) for c in cols]
-    return pa.schema(fields, metadata={"swarmbox.schema": SCHEMA_VERSION, "swarmbox.table": table})
-
-
-class _TableLog:
-    __slots__ = ("path", "schema", "rows", "writer")
-
-    def __init__(self, path: Path, table: str) -> None:
-        self.path, self.schema = path, arrow_schema(table)
-        self.rows: list[tuple] = []
-        self.writer: pq.ParquetWriter | None = None
-
-    def flush(self) -> None:
-        if not self.rows and self.writer is not None:
-            return
-        if self.writer is None:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self.writer = pq.ParquetWriter(_partial(self.path), self.schema, compression="zstd")
-        cols = list(zip(*self.rows, strict=True)) if self.rows else [() for _ in self.schema]
-        batch = pa.RecordBatch.from_arrays(
-            [_column(c, f.type) for c, f in zip(cols, self.schema, strict=True)], schema=self.schema)
-        self.writer.write_batch(batch)
-        self.rows.clear()
-
-    def close(self) -> None:
-        self.flush()
-        if self.writer is not None:
-            self.writer.close()
-            os.replace(_partial(self.path), self.path)
-            self.writer = None
-
-
-_NUMPY = {pa.float64(): np.float64, pa.int64(): np.int64, pa.int32(): np.int32, pa.int16(): np.int16,
-          pa.int8(): np.int8}
-
-
-def _column(values: Sequence, typ: pa.DataType) -> pa.Array:
-    """One Arrow column built from raw buffers.
-
-    (``pa.array`` on Python objects would import pandas, which an agent process must not load.)
-    """
-    n = len(values)
-    if typ == pa.string():
-        encoded = [v.encode() for v in values]
-        offsets = np.zeros(n + 1, dtype=np.int32)
-        np.cumsum([len(b) for b in encoded], out=offsets[1:])
-        return pa.Array.from_buffers(typ, n, [None, pa.py_buffer(offsets), pa.py_buffer(b"".join(encoded))])
-    if typ == pa.bool_():
-        bits = np.packbits(np.asarray(values, dtype=bool), bitorder="little")
-        return pa.Array.from_buffers(typ, n, [None, pa.py_buffer(bits)])
-    return pa.Array.from_buffers(typ, n, [None, pa.py_buffer(np.asarray(values, dtype=_NUMPY[typ]))])
-
-
-def _partial(path: Path) -> Path:
-    return path.with_name(path.name + ".partial")
+GROUND_TABLES = ("messages", "stages", "events")
+DRONE_TABLES = ("state", "messages", "stages", "events", "setpoints")
+NET_TABLES = ("messages",)
+_ALL_TABLES = ("state", "messages", "stages", "events", "setpoints")
 
 
 class NodeLog:
     """One node's tables. ``appender(table)`` returns a bound ``list.append`` for the hot path."""
 
-    def __init__(self, root: Path, node_id: int, tables: tuple[str, ...]) -> None:
-        self.node = node_name(node_id)
-        self._tables = {t: _TableLog(root / self.node / f"{t}.parquet", t) for t in tables}
+    def __init__(self, node_id: int, tables: tuple[str, ...]) -> None:
+        self.node_id, self.node = node_id, node_name(node_id)
+        self.tables = tables
+        self.rows: dict[str, list[tuple]] = {t: [] for t in tables}
 
     def appender(self, table: str) -> Callable[[tuple], None]:
-        # Flushing empties this same list in place, so the bound method stays valid.
-        return self._tables[table].rows.append
+        # Hand-overs empty this same list in place, so the bound method stays valid.
+        return self.rows[table].append
 
     def pending_rows(self) -> int:
-        return sum(len(t.rows) for t in self._tables.values())
-
-    def flush(self) -> None:
-        for t in self._tables.values():
-            t.flush()
-
-    def close(self) -> None:
-        for t in self._tables.values():
-            t.close()
+        return sum(map(len, self.rows.values()))
 
 
-GROUND_TABLES = ("messages", "stages", "events")
-DRONE_TABLES = ("state", "messages", "stages", "events", "setpoints")
-NET_TABLES = ("messages",)
+class _Chunk:
+    """One hand-over of one table: the nodes in order and their rows, concatenated."""
+
+    __slots__ = ("table", "nodes", "counts", "rows")
+
+    def __init__(self, table: str, nodes: list[int], counts: list[int], rows: list[tuple]) -> None:
+        self.table, self.nodes, self.counts, self.rows = table, nodes, counts, rows
+
+
+class _SpillWriter(threading.Thread):
+    """Background thread: chunks in, Parquet row groups out; remembers where each node's rows went."""
+
+    def __init__(self, root: Path, max_chunks: int) -> None:
+        super().__init__(name="swarmbox-recorder", daemon=True)
+        self.root = root
+        self.inbox: queue.Queue[_Chunk | None] = queue.Queue(maxsize=max_chunks)
+        self.writers: dict[str, pq.ParquetWriter] = {}
+        #: table -> row group index -> [(node, offset, count)]
+        self.layout: dict[str, list[list[tuple[int, int, int]]]] = {}
+        self.errors: list[str] = []
+
+    def run(self) -> None:
+        while (chunk := self.inbox.get()) is not None:
+            try:
+                self._write(chunk)
+            except Exception as exc:  # noqa: BLE001 - reported by close(); later chunks still written
+                self.errors.append(f"{chunk.table} rows of nodes {chunk.nodes[:5]}...: "
+                                   f"{type(exc).__name__}: {exc}")
+
+    def _write(self, chunk: _Chunk) -> None:
+        node = np.repeat(np.asarray(chunk.nodes, np.int16), chunk.counts)
+        data = batch(chunk.table, chunk.rows, node)
+        writer = self.writers.get(chunk.table)
+        if writer is None:
+            self.root.mkdir(parents=True, exist_ok=True)
+            writer = pq.ParquetWriter(self.root / f"{chunk.table}.parquet", spill_schema(chunk.table),
+                                      compression="lz4")
+            self.writers[chunk.table] = writer
+        writer.write_batch(data, row_group_size=len(chunk.rows))
+        offsets = np.concatenate([[0], np.cumsum(chunk.counts)[:-1]]).tolist()
+        self.layout.setdefault(chunk.table, []).append(
+            [(n, o, c) for n, o, c in zip(chunk.nodes, offsets, chunk.counts, strict=True)])
+
+    def finish(self) -> None:
+        if self.is_alive():
+            self.inbox.put(None)
+            self.join()
+        for writer in self.writers.values():
+            writer.close()
+        self.writers.clear()
 
 
 class Recorder:
     """All node logs of one run, under ``<run>/logs/``."""
 
-    def __init__(self, run_dir: Path, flush_rows: int = 2_000_000) -> None:
-        self.root = Path(run_dir) / "logs"
+    def __init__(self, run_dir: Path, flush_rows: int = 500_000, max_chunks: int = 8) -> None:
+        self.run_dir = Path(run_dir)
+        self.root = self.run_dir / "logs"
         self.flush_rows = flush_rows
         self.logs: dict[int, NodeLog] = {}
+        self._spill = _SpillWriter(self.run_dir / ".spill", max_chunks)
 
     def node(self, node_id: int) -> NodeLog:
         if node_id not in self.logs:
             tables = GROUND_TABLES if node_id == -1 else NET_TABLES if node_id == -2 else DRONE_TABLES
-            self.logs[node_id] = NodeLog(self.root, node_id, tables)
+            self.logs[node_id] = NodeLog(node_id, tables)
         return self.logs[node_id]
 
     def maybe_flush(self) -> None:
-        """Write buffered rows out once they exceed ``flush_rows`` in total (bounds memory)."""
-        if sum(log.pending_rows() for log in self.logs.values()) >= self.flush_rows:
-            for log in self.logs.values():
-                log.flush()
+        """Hand the buffers to the writer once they hold ``flush_rows`` rows."""
+        if self.pending_rows() >= self.flush_rows:
+            self.flush()
+
+    def pending_rows(self) -> int:
+        return sum(log.pending_rows() for log in self.logs.values())
+
+    def flush(self) -> None:
+        """Hand every buffered row to the background writer (the tick thread does no encoding)."""
+        if not self._spill.is_alive():
+            self._spill.start()
+        for table in _ALL_TABLES:
+            chunk = self._take(table)
+            if chunk is not None:
+                self._spill.inbox.put(chunk)
+
+    def _take(self, table: str) -> _Chunk | None:
+        """Empty every node's buffer of ``table`` into one chunk (copies pointers only)."""
+        nodes, counts, flat = [], [], []
+        for log in self.logs.values():
+            rows = log.rows.get(table)
+            if rows:
+                nodes.append(log.node_id)
+                counts.append(len(rows))
+                flat.extend(rows)
+                rows.clear()
+        return _Chunk(table, nodes, counts, flat) if nodes else None
 
     def close(self) -> None:
-        errors = []
-        for log in self.logs.values():
-            try:
-                log.close()
-            except Exception as exc:  # keep closing the others; report all at the end
-                errors.append(f"{log.node}: {exc}")
+        """Write everything out as per-node files; raise OSError naming what could not be written.
+
+        Rows still buffered go straight from memory into the per-node files, not through the spill
+        file: a short run never touches the spill at all.
+        """
+        tails = {t: c for t in _ALL_TABLES if (c := self._take(t)) is not None}
+        self._spill.finish()
+        errors = [f"log writer failed: {e}" for e in self._spill.errors]
+        errors += _split(self._spill.root, self._spill.layout, tails, self.root, self.logs)
+        if not errors:
+            shutil.rmtree(self._spill.root, ignore_errors=True)
         if errors:
             raise OSError("could not finish logs: " + "; ".join(errors))
+
+
+def _split(spill: Path, layout: dict[str, list[list[tuple[int, int, int]]]], tails: dict[str, _Chunk],
+           root: Path, logs: dict[int, NodeLog]) -> list[str]:
+    """Cut spill files and buffered tails into ``<root>/<node>/<table>.parquet`` (every expected file)."""
+    errors: list[str] = []
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        for table in _ALL_TABLES:
+            owners = [log for log in logs.values() if table in log.tables]
+            if not owners:
+                continue
+            pieces: dict[int, list[pa.Table]] = {}
+            try:
+                _spilled(spill / f"{table}.parquet", layout.get(table, []), pieces)
+                if table in tails:
+                    _buffered(tails[table], pieces)
+            except Exception as exc:  # noqa: BLE001 - keep going: other tables may be fine
+                errors.append(f"{table}: {type(exc).__name__}: {exc}")
+            jobs = [pool.submit(_write_node_file, root / log.node / f"{table}.parquet", table,
+                                pieces.get(log.node_id, [])) for log in owners]
+            errors += [str(e) for e in (j.exception() for j in jobs) if e is not None]
+    return errors
+
+
+def _buffered(chunk: _Chunk, pieces: dict[int, list[pa.Table]]) -> None:
+    data = pa.Table.from_batches([batch(chunk.table, chunk.rows)])
+    offset = 0
+    for node, count in zip(chunk.nodes, chunk.counts, strict=True):
+        pieces.setdefault(node, []).append(data.slice(offset, count))
+        offset += count
+
+
+def _spilled(path: Path, groups: list[list[tuple[int, int, int]]], pieces: dict[int, list[pa.Table]]) -> None:
+    if not groups:
+        return
+    data = pq.ParquetFile(path)
+    for index, spans in enumerate(groups):
+        group = data.read_row_group(index).drop_columns(["node"])
+        for node, offset, count in spans:
+            pieces.setdefault(node, []).append(group.slice(offset, count))
+
+
+def _write_node_file(path: Path, table: str, pieces: list[pa.Table]) -> None:
+    schema = arrow_schema(table)
+    data = pa.concat_tables(pieces).replace_schema_metadata(schema.metadata) if pieces else \
+        schema.empty_table()
+    data = data.cast(schema)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(path.name + ".partial")
+    pq.write_table(data, partial, compression="zstd")
+    os.replace(partial, path)

@@ -41,6 +41,7 @@ def test_default_formation_4_drones(benchmark, tmp_path_factory):
     record(benchmark, manifest, 4)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n", [36, 100])
 def test_hover_grid(benchmark, tmp_path_factory, n):
     overrides = ["algo=hover", "mission=hover", "algo.params.hover_s=20"]

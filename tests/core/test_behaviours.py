@@ -72,8 +72,8 @@ def test_proximity_alerts_name_close_drones_only(run):
 
 
 def test_a_log_file_appears_only_once_complete(tmp_path):
-    """Rows go to <table>.parquet.partial; only close() renames it, so a file under its final name
-    is always whole."""
+    """Mid-run rows go to the run's spill file; per-node files are written as <table>.parquet.partial
+    by close() and only then renamed, so a file under its final name is always whole."""
     rec = Recorder(tmp_path, flush_rows=1)
     log = rec.node(0)
     add = log.appender("stages")
@@ -81,8 +81,8 @@ def test_a_log_file_appears_only_once_complete(tmp_path):
     partial = final.with_name("stages.parquet.partial")
     add((0.0, 0, 1, "ICEBREAK", ""))
     rec.maybe_flush()
-    assert partial.is_file() and not final.exists()
+    assert not final.exists() and not partial.exists()
     add((1.0, 40, 2, "PREPARATION", ""))
     rec.close()
-    assert final.is_file() and not partial.exists()
+    assert final.is_file() and not partial.exists() and not (tmp_path / ".spill").exists()
     assert pq.read_table(final).column("name").to_pylist() == ["ICEBREAK", "PREPARATION"]

@@ -1,0 +1,1 @@
+"""Throughput benchmarks: SwarmBox against the bare pymunk loop (``python -m swarmbox.bench``)."""

@@ -1,0 +1,62 @@
+"""The recorder: rows handed to the background writer mid-run come back per node, in order, intact."""
+
+from __future__ import annotations
+
+import math
+
+import pyarrow.parquet as pq
+import pytest
+
+from swarmbox.record.schema import SCHEMA_VERSION
+from swarmbox.record.writer import Recorder
+
+
+def _event(tick: int, node: int, name: str = "x") -> tuple:
+    return (tick * 0.025, tick, "marker", name, node, "{}")
+
+
+def test_rows_split_per_node_in_order_across_many_handovers(tmp_path):
+    rec = Recorder(tmp_path, flush_rows=7)          # a hand-over every few ticks
+    logs = {n: rec.node(n).appender("events") for n in (-1, 0, 1, 2)}
+    for tick in range(50):
+        for node, append in logs.items():
+            if (tick + node) % 3:                   # uneven rows per node and per chunk
+                append(_event(tick, node, name="é" if tick == 7 else "x"))
+        rec.maybe_flush()
+    rec.close()
+    for node, name in ((-1, "ground"), (0, "drone_0"), (1, "drone_1"), (2, "drone_2")):
+        table = pq.read_table(tmp_path / "logs" / name / "events.parquet")
+        assert table.column("tick").to_pylist() == [t for t in range(50) if (t + node) % 3]
+        assert set(table.column("subject").to_pylist()) == {node}
+        assert table.schema.metadata[b"swarmbox.schema"] == SCHEMA_VERSION.encode()
+        assert table.schema.field("t_s").metadata[b"unit"] == b"s"
+        names = dict(zip(table.column("tick").to_pylist(), table.column("name").to_pylist(), strict=True))
+        assert names.get(7, "é") == "é" and names.get(8, "x") == "x"   # non-ASCII text survives
+
+
+def test_every_expected_file_exists_even_without_rows_and_nothing_else_is_left(tmp_path):
+    rec = Recorder(tmp_path)
+    rec.node(-1)
+    rec.node(3).appender("state")(
+        (0.0, 0, 1, False, True, "manual", *(0.0,) * 6, *(math.nan,) * 6, 0.0, 1.0))
+    rec.node(-2)
+    rec.close()
+    logs = tmp_path / "logs"
+    assert sorted(p.relative_to(logs).as_posix() for p in logs.rglob("*")) == sorted([
+        "drone_3", "ground", "net", "ground/messages.parquet", "ground/stages.parquet",
+        "ground/events.parquet", "net/messages.parquet",
+        *(f"drone_3/{t}.parquet" for t in ("state", "messages", "stages", "events", "setpoints"))])
+    assert pq.read_table(logs / "drone_3" / "state.parquet").num_rows == 1
+    assert pq.read_table(logs / "ground" / "events.parquet").num_rows == 0
+    assert not (tmp_path / ".spill").exists()
+
+
+def test_a_bad_row_fails_the_close_with_a_named_error_and_keeps_other_tables(tmp_path):
+    rec = Recorder(tmp_path, flush_rows=1)
+    rec.node(0).appender("events")(("not a time", 0, "marker", "x", 0, "{}"))
+    rec.node(0).appender("stages")((0.0, 0, 1, "ICEBREAK", ""))
+    rec.maybe_flush()
+    with pytest.raises(OSError, match="log writer failed"):
+        rec.close()
+    assert pq.read_table(tmp_path / "logs" / "drone_0" / "stages.parquet").num_rows == 1
+    assert pq.read_table(tmp_path / "logs" / "drone_0" / "events.parquet").num_rows == 0

@@ -107,6 +107,7 @@ class NodeProcess:
             default=LinkSpec(n.latency_ms / 1e3, n.jitter_ms / 1e3, n.loss_prob), links=links,
             subscribers=heartbeat_subscribers(dict(topo.superiors), cfg.topology.peers),
             on_reject=self._on_reject)
+        # One node per recorder; never flushed mid-run, so the run-wide spill directory stays unused
         self.recorder = Recorder(run_dir)
         log = self.recorder.node(node_id)
         inbox = self.medium.register(node_id, self.clock, log.appender("messages"))

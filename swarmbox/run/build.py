@@ -110,7 +110,9 @@ def backend_class(cfg: DictConfig) -> type:
         raise ConfigError(f"backend._target_: cannot import '{target}': {exc}") from exc
 
 
-def backend_of(cfg: DictConfig, mission: Mission, tick_s: float, seed: int, run_dir: Path) -> Any:
+def backend_of(cfg: DictConfig, mission: Mission, tick_s: float, seed: int, run_dir: Path,
+               drone_ids: list[int] | None = None) -> Any:
+    """The backend flying ``drone_ids`` (default: every drone of the mission)."""
     params = OmegaConf.to_container(cfg.backend, resolve=True)
     params.pop("_target_", None)
     params.pop("name", None)
@@ -118,9 +120,9 @@ def backend_of(cfg: DictConfig, mission: Mission, tick_s: float, seed: int, run_
         params["sim"] = {k: v for k, v in params["sim"].items() if v is not None}
     s = cfg.run.safety
     limits = SafetyLimits(s.max_speed_m_s, s.max_accel_m_s2, s.geofence_radius_m, s.max_alt_m, s.max_jump_m)
-    homes = [mission.initial_positions[i] for i in mission.drone_ids]
+    homes = [mission.initial_positions[i] for i in (mission.drone_ids if drone_ids is None else drone_ids)]
     cls = backend_class(cfg)
-    if "run_dir" in params and params["run_dir"] is None:
+    if "run_dir" in params and (params["run_dir"] is None or drone_ids is not None):
         params["run_dir"] = str(run_dir)   # where a backend keeps its own logs (ULogs, vehicle output)
     return cls(homes_ned_m=homes, tick_s=tick_s, rng=rng_for(seed, "backend"),
                obstacles=mission.obstacles, limits=limits, **params)

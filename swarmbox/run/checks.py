@@ -69,6 +69,9 @@ def _positive(key: str, value: Any, *, allow_zero: bool = False) -> None:
 def _run(r: DictConfig) -> None:
     _positive("run.tick_hz", r.tick_hz)
     _positive("run.speed", r.speed)
+    for key, allowed in (("runtime", ("single", "processes")), ("monitor", ("auto", "on", "off"))):
+        if r[key] not in allowed:
+            raise ConfigError(f"run.{key} must be one of {', '.join(allowed)}, got '{r[key]}'")
     if r.hook_timeout_s is not None:
         _positive("run.hook_timeout_s", r.hook_timeout_s)
     for key in ("lost_inferior_ticks", "lost_superior_ticks", "task_retry_ticks", "arm_retry_ticks",

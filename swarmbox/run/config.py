@@ -94,6 +94,19 @@ class SafetyConfig:
 
 
 @dataclass
+class NetConfig:
+    """The real network of ``runtime=processes`` (docs/distributed.md)."""
+
+    key: Optional[str] = None       # the mission's HMAC key; null: from the env var below, else random
+    key_env: str = "SWARMBOX_NET_KEY"   # environment variable holding the key
+    max_age_s: float = 2.0          # s, wall-clock bound between a frame's sender and its receiver
+    replay_window: int = 1024       # counters remembered per sender (replay protection)
+    ready_timeout_s: float = 120.0  # wall s for every node process to be built and connected
+    stop_timeout_s: float = 30.0    # wall s for agents to finish after the ground, then SIGTERM
+    start_delay_s: float = 1.0      # wall s between "all ready" and tick 0
+
+
+@dataclass
 class RunConfig:
     tick_hz: float = 40.0
     timeouts_s: StageTimeouts = field(default_factory=StageTimeouts)
@@ -121,6 +134,8 @@ class RunConfig:
     # vehicles were not started by the run (px4 backend connecting to running vehicles: hardware).
     hook_timeout_s: Optional[float] = 10.0
     resume: bool = False            # skip a run whose directory holds a finished run (ok/aborted)
+    runtime: str = "single"         # single: one process | processes: ground + one process per agent
+    net: NetConfig = field(default_factory=NetConfig)
 
 
 @dataclass

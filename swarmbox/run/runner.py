@@ -122,6 +122,11 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
     """
     _refuse_finished(run_dir)
     m = checks.check(cfg)
+    if cfg.run.runtime == "processes":
+        if prepare is not None:
+            raise ValueError("prepare() needs the single-process runtime (run.runtime=single)")
+        from swarmbox.run import processes
+        return processes.execute(cfg, run_dir, choices, overrides)
     if cfg.mission.file:   # record the file's own mission, not the group it was loaded over
         choices = {**choices, "mission": m.name}
     existed = run_dir.exists()

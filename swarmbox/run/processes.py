@@ -1,0 +1,259 @@
+"""``run.runtime=processes``: the ground and every agent as separate OS processes over Zenoh.
+
+The launcher writes the run's resolved config (the key removed), picks a free TCP port per node on
+127.0.0.1, starts ``python -m swarmbox.run.node`` for the ground and each drone, waits until every
+node is built and connected (``nodes/<node>.ready``), then fixes the start instant
+(``nodes/start.json``) so that all nodes tick from the same wall-clock epoch, each on its own clock.
+The run ends when the ground process ends; agents get ``run.net.stop_timeout_s`` to land and
+finish, then SIGTERM, then SIGKILL. Ctrl-C stops every node cleanly. Node logs land in the usual
+``logs/<node>/`` tables, console output in ``nodes/<node>.log``, and ``run.json`` gathers every
+node's outcome, exit code and resource use.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import secrets
+import signal
+import socket
+import subprocess
+import sys
+import time as wall
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from omegaconf import DictConfig, OmegaConf
+
+from swarmbox.core.messages import GROUND_ID
+from swarmbox.record.schema import SCHEMA_VERSION, node_name
+from swarmbox.run import build, mission, node_faults
+
+_PACKAGE_ROOT = Path(__file__).resolve().parents[2]
+#: The MAVLink 2 signing key of the vehicle links (``backend.signing_key``), handed to agent processes.
+MAVLINK_KEY_ENV = "SWARMBOX_MAVLINK_KEY"
+#: Config keys whose values never reach a file: the swarm key and the MAVLink signing key.
+SECRET_KEYS = frozenset({"key", "signing_key"})
+POLL_S = 0.2
+
+
+class LaunchError(RuntimeError):
+    """A node process could not be started or never became ready."""
+
+
+def free_ports(n: int) -> list[int]:
+    """``n`` distinct TCP ports the OS reports free on 127.0.0.1."""
+    socks = []
+    try:
+        for _ in range(n):
+            s = socket.socket()
+            s.bind(("127.0.0.1", 0))
+            socks.append(s)
+        return [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
+
+
+def _tail(path: Path) -> str:
+    try:
+        return path.read_text(errors="replace")[-1500:]
+    except OSError:
+        return ""
+
+
+def autopilots(cfg: DictConfig, m: Any, run_dir: Path) -> tuple[Any, dict[str, dict[str, Any]]]:
+    """PX4 SITL instances for ``backend=px4`` with a ``px4_build``, started here, not by the agents.
+
+    They stand for the drones' autopilots, which exist before and apart from the companion computers:
+    each agent process then connects to its own instance (``plan.json`` ``vehicles``) like to a real
+    vehicle. Returns the launcher (None otherwise) and each agent's connection settings.
+    """
+    b = cfg.backend
+    if b.get("name") != "px4" or not b.get("px4_build"):
+        return None, {}
+    from swarmbox.hal.mavlink.frames import GeoFrame
+    from swarmbox.hal.px4.backend import Px4Params
+    from swarmbox.hal.px4.sitl import SitlLauncher, connection_of
+
+    params = OmegaConf.to_container(b, resolve=True)
+    params = {k: v for k, v in params.items() if k not in ("_target_", "name")}
+    p = Px4Params.from_kwargs(params)
+    homes = [tuple(float(x) for x in m.initial_positions[i]) for i in m.drone_ids]
+    sitl = SitlLauncher(p, homes, GeoFrame(p.origin_lat_deg, p.origin_lon_deg, p.origin_alt_m), run_dir)
+    sitl.start([0] * len(homes))
+    return sitl, {node_name(i): {"connections": [connection_of(k)], "system_ids": [k + 1]}
+                  for k, i in enumerate(m.drone_ids)}
+
+
+class NodeSet:
+    """The node processes of one run."""
+
+    def __init__(self, cfg: DictConfig, run_dir: Path, drone_ids: list[int]) -> None:
+        self.cfg, self.run_dir = cfg, run_dir
+        self.nodes_dir = run_dir / "nodes"
+        self.ids = [GROUND_ID, *drone_ids]
+        self.procs: dict[int, subprocess.Popen[bytes]] = {}
+
+    def start(self, secrets_env: dict[str, str], vehicles: dict[str, dict[str, Any]]) -> None:
+        self.nodes_dir.mkdir(parents=True, exist_ok=True)
+        ports = free_ports(len(self.ids))
+        locators = {node_name(i): f"tcp/127.0.0.1:{p}" for i, p in zip(self.ids, ports, strict=True)}
+        plan = {"mission_id": secrets.token_hex(6), "locators": locators, "vehicles": vehicles}
+        (self.nodes_dir / "plan.json").write_text(json.dumps(plan, indent=2))
+        env = dict(os.environ)
+        env.pop(MAVLINK_KEY_ENV, None)
+        env.update(secrets_env)
+        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(_PACKAGE_ROOT), env.get("PYTHONPATH")]))
+        for i in self.ids:
+            role = ["ground"] if i == GROUND_ID else ["agent", "--drone", str(i)]
+            with open(self.nodes_dir / f"{node_name(i)}.log", "wb") as out:
+                self.procs[i] = subprocess.Popen(
+                    [sys.executable, "-m", "swarmbox.run.node", *role, "--run-dir", str(self.run_dir)],
+                    stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT, env=env,
+                    start_new_session=True)
+        pids = {node_name(i): p.pid for i, p in self.procs.items()}
+        (self.nodes_dir / "pids.json").write_text(json.dumps(pids))
+
+    def wait_ready(self, timeout_s: float) -> None:
+        deadline = wall.monotonic() + timeout_s
+        waiting = set(self.ids)
+        while waiting:
+            for i in list(waiting):
+                if (self.nodes_dir / f"{node_name(i)}.ready").exists():
+                    waiting.discard(i)
+                elif self.procs[i].poll() is not None:
+                    log = _tail(self.nodes_dir / f"{node_name(i)}.log")
+                    raise LaunchError(f"{node_name(i)} exited with code {self.procs[i].returncode} "
+                                      f"before it was ready:\n{log}")
+            if wall.monotonic() > deadline:
+                late = [node_name(i) for i in sorted(waiting)]
+                raise LaunchError(f"nodes not ready after {timeout_s:g} s: {late}")
+            wall.sleep(POLL_S)
+
+    def go(self, delay_s: float) -> float:
+        epoch = wall.time() + delay_s
+        tmp = self.nodes_dir / ".start.json.tmp"
+        tmp.write_text(json.dumps({"epoch_wall_s": epoch}))
+        os.replace(tmp, self.nodes_dir / "start.json")
+        return epoch
+
+    def wait_ground(self) -> None:
+        ground = self.procs[GROUND_ID]
+        while ground.poll() is None:
+            wall.sleep(POLL_S)
+
+    def finish_agents(self, timeout_s: float) -> None:
+        deadline = wall.monotonic() + timeout_s
+        while any(p.poll() is None for p in self.procs.values()) and wall.monotonic() < deadline:
+            wall.sleep(POLL_S)
+        self.stop()
+
+    def stop(self, grace_s: float = 15.0) -> None:
+        """SIGTERM every live node, then SIGKILL what is still running after ``grace_s``."""
+        for p in self.procs.values():
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+        deadline = wall.monotonic() + grace_s
+        for p in self.procs.values():
+            try:
+                p.wait(timeout=max(0.1, deadline - wall.monotonic()))
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+
+    def results(self) -> dict[str, dict[str, Any]]:
+        out = {}
+        for i, p in self.procs.items():
+            name = node_name(i)
+            try:
+                res = json.loads((self.nodes_dir / f"{name}.json").read_text())
+            except (OSError, ValueError):
+                res = {"node": name, "status": "failed", "reason": "no outcome written"}
+            code = p.returncode
+            res["exit_code"] = code
+            if code is not None and code < 0:
+                res.update(status="killed", reason=f"killed by {signal.Signals(-code).name}")
+            out[name] = res
+        return out
+
+
+def outcome(results: dict[str, dict[str, Any]]) -> tuple[str, str]:
+    """The run's status and reason: the ground's, plus what happened to the agents."""
+    g = results[node_name(GROUND_ID)]
+    status = g["status"] if g["status"] in ("ok", "aborted") else "failed"
+    parts = [g.get("reason", "")] if status != "ok" or g.get("reason") else []
+    if status == "failed" and g["status"] == "killed":
+        parts = [f"ground {g['reason']}"]
+    if g.get("lost_drones"):
+        parts.append(f"lost drones {g['lost_drones']}")
+    for name, r in results.items():
+        if name != node_name(GROUND_ID) and r["status"] in ("killed", "failed"):
+            parts.append(f"{name} {r['status']}: {r['reason']}")
+    return status, "; ".join(p for p in parts if p)
+
+
+def redact(overrides: list[str]) -> list[str]:
+    """Command-line overrides with the value of every key setting hidden (``run.net.key=***``)."""
+    out = []
+    for o in overrides:
+        name, eq, _ = o.partition("=")
+        out.append(f"{name}=***" if eq and name.lstrip("+~").rsplit(".", 1)[-1] in SECRET_KEYS else o)
+    return out
+
+
+def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: list[str]) -> dict[str, Any]:
+    """Run ``cfg`` as one process per node; returns the manifest written as ``run.json``."""
+    from swarmbox.run.runner import RunExistsError, _git_sha, _versions, write_atomic
+
+    run_dir.mkdir(parents=True, exist_ok=True)
+    if (run_dir / "run.json").exists():
+        raise RunExistsError(f"{run_dir} already holds a finished run; refusing to overwrite it")
+    key = cfg.run.net.key or os.environ.get(cfg.run.net.key_env) or secrets.token_hex(32)
+    public = OmegaConf.to_container(cfg, resolve=True)
+    public["run"]["net"]["key"] = None          # the keys travel in the environment only
+    secrets_env = {cfg.run.net.key_env: key}
+    if isinstance(public.get("backend"), dict) and public["backend"].get("signing_key"):
+        secrets_env[MAVLINK_KEY_ENV] = str(public["backend"]["signing_key"])
+        public["backend"]["signing_key"] = None
+    write_atomic(run_dir / "config.yaml", OmegaConf.to_yaml(OmegaConf.create(public)))
+    manifest: dict[str, Any] = {
+        "schema": SCHEMA_VERSION, "status": "failed", "reason": "", "traceback": None, "runtime": "processes",
+        "seed": int(cfg.seed), "choices": choices, "overrides": redact(overrides), "sim_time_s": 0.0,
+        "wall_time_s": 0.0, "real_time_factor": None, "ticks": 0, "tick_s": 1.0 / cfg.run.tick_hz,
+        "n_drones": 0, "nodes": [], "clocks": build.clock_settings(cfg), "node_results": {},
+        "versions": _versions(), "git_sha": _git_sha(),
+        "started_at": datetime.now(UTC).isoformat(timespec="seconds")}
+    start = wall.time()
+    sitl = nodes = None
+    try:
+        m = mission.load(cfg, build.rng_for(int(cfg.seed), "dataset"))
+        node_faults.check(cfg)
+        manifest.update(n_drones=m.swarm_size, nodes=[node_name(i) for i in [GROUND_ID, *m.drone_ids]])
+        nodes = NodeSet(cfg, run_dir, list(m.drone_ids))
+        sitl, vehicles = autopilots(cfg, m, run_dir)
+        nodes.start(secrets_env, vehicles)
+        nodes.wait_ready(float(cfg.run.net.ready_timeout_s))
+        start = nodes.go(float(cfg.run.net.start_delay_s))
+        nodes.wait_ground()
+        nodes.finish_agents(float(cfg.run.net.stop_timeout_s))
+        results = nodes.results()
+        status, reason = outcome(results)
+        g = results[node_name(GROUND_ID)]
+        manifest.update(status=status, reason=reason, node_results=results, ticks=g.get("ticks", 0),
+                        sim_time_s=g.get("sim_time_s", 0.0))
+    except KeyboardInterrupt:
+        manifest.update(status="aborted", reason="interrupted (Ctrl-C)")
+    except Exception as exc:
+        manifest.update(status="failed", reason=f"{type(exc).__name__}: {exc}")
+    finally:
+        if nodes is not None:
+            nodes.stop()
+            manifest["node_results"] = manifest["node_results"] or nodes.results()
+        if sitl is not None:
+            sitl.stop()
+        elapsed = max(wall.time() - start, 1e-9)
+        manifest.update(wall_time_s=elapsed, real_time_factor=manifest["sim_time_s"] / elapsed)
+        write_atomic(run_dir / "run.json", json.dumps(manifest, indent=2, sort_keys=True))
+    return manifest

@@ -27,7 +27,13 @@ def fleet(homes, **kw) -> MavsimBackend:
     return MavsimBackend(homes_ned_m=list(homes), tick_s=0.025, rng=np.random.default_rng(1), **kw)
 
 
-@pytest.mark.parametrize("check", BACKEND_CHECKS, ids=lambda c: c.__name__)
+#: checks that fly for several seconds of wall time: with the end-to-end tests (pytest -m slow)
+LONG = {"check_hold_stops", "check_return_to_launch", "check_mission_cycle",
+        "check_nonfinite_setpoint_refused"}
+
+
+@pytest.mark.parametrize("check", [pytest.param(c, marks=pytest.mark.slow) if c.__name__ in LONG else c
+                                   for c in BACKEND_CHECKS], ids=lambda c: c.__name__)
 def test_conformance(check):
     check(fleet)
 
@@ -45,6 +51,7 @@ def names(f: Flight, kind: str) -> list[str]:
     return [e.name for e in f.events if e.kind == kind]
 
 
+@pytest.mark.slow
 def test_unexpected_traffic_is_logged_and_survived(one):
     f, v = Flight(one), one.vehicles[0]
     f.run_until(lambda: f.tel().ready_to_arm, 10.0, "ready")
@@ -80,6 +87,7 @@ def test_unexpected_traffic_is_logged_and_survived(one):
     f.land_and_disarm(0)
 
 
+@pytest.mark.slow
 def test_silent_vehicle_is_declared_lost_then_regained():
     backend = fleet([(0.0, 0.0, 0.0)], link_timeout_s=2.0, command_timeout_s=0.5, command_retries=1)
     f, v = Flight(backend), backend.vehicles[0]

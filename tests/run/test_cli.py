@@ -4,6 +4,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from tests.conftest import ROOT
 
 
@@ -12,6 +14,7 @@ def swarmbox_run(*args, cwd=ROOT, timeout=300):
                           text=True, timeout=timeout)
 
 
+@pytest.mark.slow
 def test_sweep_runs_every_job_in_its_own_directory(tmp_path):
     proc = swarmbox_run("-m", "algo=hover,formation", "seed=range(3)", "mission=hover",
                         f"hydra.sweep.dir={tmp_path}")

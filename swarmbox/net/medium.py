@@ -35,6 +35,22 @@ class LinkSpec:
         if not 0.0 <= self.loss_prob <= 1.0:
             raise ValueError(f"link loss_prob must be within [0, 1], got {self.loss_prob}")
 
+    def impair(self, rng: np.random.Generator, hooks: list[LinkHook], msg, src: int, dst: int,
+               t: float) -> tuple[float, str]:
+        """``(delay_s, drop_reason or "")`` of one message on this link: latency, jitter, loss, then
+        every fault hook in order (the draws happen in this order, so a seed replays exactly)."""
+        delay, reason = self.latency_s, ""
+        if self.jitter_s:
+            delay += self.jitter_s * rng.random()
+        if self.loss_prob and rng.random() < self.loss_prob:
+            reason = "loss"
+        for hook in hooks:
+            verdict = hook(msg, src, dst, t)
+            if verdict is not None:
+                reason = reason or verdict[0]
+                delay += verdict[1]
+        return delay, reason
+
 
 #: A link hook (used by fault injection) sees each (message, src, dst) at send time and returns
 #: None to leave it alone, or (drop_reason or "", extra_delay_s).
@@ -108,16 +124,7 @@ class SimMedium:
         mtype, nbytes = MESSAGE_TYPES[type(msg)], msg.nbytes
         sender.log((sender.clock.now(), tick, "send", msg.msg_id, mtype, src, dst, nbytes, msg.t_sent_s, ""))
         spec = self._links.get((src, dst), self._default) if self._links else self._default
-        delay, reason = spec.latency_s, ""
-        if spec.jitter_s:
-            delay += spec.jitter_s * self._rng.random()
-        if spec.loss_prob and self._rng.random() < spec.loss_prob:
-            reason = "loss"
-        for hook in self.hooks:
-            verdict = hook(msg, src, dst, t)
-            if verdict is not None:
-                reason = reason or verdict[0]
-                delay += verdict[1]
+        delay, reason = spec.impair(self._rng, self.hooks, msg, src, dst, t)
         receiver = self._nodes.get(dst)
         if not reason and (receiver is None or not receiver.connected):
             reason = "unreachable"

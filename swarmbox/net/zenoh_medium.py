@@ -156,16 +156,7 @@ class ZenohMedium:
             return
         src, dst = msg.src, self.node_id
         spec = self._links.get((src, dst), self._default) if self._links else self._default
-        delay, reason = spec.latency_s, ""
-        if spec.jitter_s:
-            delay += spec.jitter_s * self._rng.random()
-        if spec.loss_prob and self._rng.random() < spec.loss_prob:
-            reason = "loss"
-        for hook in self.hooks:
-            verdict = hook(msg, src, dst, arrival)
-            if verdict is not None:
-                reason = reason or verdict[0]
-                delay += verdict[1]
+        delay, reason = spec.impair(self._rng, self.hooks, msg, src, dst, arrival)
         if reason:
             self._log((self._clock.at(arrival), self._time.tick, "drop", msg.msg_id, MESSAGE_TYPES[type(msg)],
                        src, dst, len(frame), msg.t_sent_s, reason))

@@ -208,8 +208,9 @@ def _spilled(path: Path, groups: list[list[tuple[int, int, int]]], pieces: dict[
 
 def _write_node_file(path: Path, table: str, pieces: list[pa.Table]) -> None:
     schema = arrow_schema(table)
+    # an empty table from no batches: Schema.empty_table() would import pandas into the runner
     data = pa.concat_tables(pieces).replace_schema_metadata(schema.metadata) if pieces else \
-        schema.empty_table()
+        pa.Table.from_batches([], schema=schema)
     data = data.cast(schema)
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_name(path.name + ".partial")

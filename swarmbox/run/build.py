@@ -100,10 +100,11 @@ def medium_of(cfg: DictConfig, time: TimeSource, seed: int, recorder: Recorder,
                      drop_log=recorder.node(NET_ID).appender("messages"))
 
 
-def backend_class(cfg: DictConfig) -> type:
-    target = cfg.backend.get("_target_")
+def backend_class(node: DictConfig) -> type:
+    """The class named by the backend config's ``_target_``, or a ConfigError naming the key."""
+    target = node.get("_target_")
     if not target:
-        raise ConfigError("backend: no _target_ (the backend class) given")
+        raise ConfigError("backend._target_: no backend class given")
     try:
         return get_class(target)
     except Exception as exc:
@@ -121,7 +122,7 @@ def backend_of(cfg: DictConfig, mission: Mission, tick_s: float, seed: int, run_
     s = cfg.run.safety
     limits = SafetyLimits(s.max_speed_m_s, s.max_accel_m_s2, s.geofence_radius_m, s.max_alt_m, s.max_jump_m)
     homes = [mission.initial_positions[i] for i in (mission.drone_ids if drone_ids is None else drone_ids)]
-    cls = backend_class(cfg)
+    cls = backend_class(cfg.backend)
     if "run_dir" in params and (params["run_dir"] is None or drone_ids is not None):
         params["run_dir"] = str(run_dir)   # where a backend keeps its own logs (ULogs, vehicle output)
     return cls(homes_ned_m=homes, tick_s=tick_s, rng=rng_for(seed, "backend"),

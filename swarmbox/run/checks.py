@@ -121,12 +121,7 @@ def _backend(node: DictConfig) -> None:
     params = OmegaConf.to_container(node, resolve=True)
     target = str(params.pop("_target_", "") or "")
     params.pop("name", None)
-    if not target:
-        raise ConfigError("backend._target_: no backend class given")
-    try:
-        cls = get_class(target)
-    except Exception as exc:
-        raise ConfigError(f"backend._target_: cannot import '{target}': {exc}") from exc
+    cls = build.backend_class(node)
     try:
         if target.endswith("MavsimBackend"):
             opts = {f.name: params.pop(f.name) for f in fields(MavsimOptions) if f.name in params}

@@ -245,7 +245,7 @@ def _close(manifest: dict[str, Any], swarm: Swarm | None, recorder: Recorder, ru
 
 def _monitor(cfg: DictConfig, title: str):
     """The live dashboard of this run, or None (see :mod:`swarmbox.monitor`)."""
-    realtime = bool(getattr(build.backend_class(cfg), "realtime", False))
+    realtime = bool(getattr(build.backend_class(cfg.backend), "realtime", False))
     dashboard = live_monitor.wanted(cfg.run.monitor, realtime=realtime, multirun=_in_sweep())
     if not dashboard and not cfg.run.rerun:
         return None

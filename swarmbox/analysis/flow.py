@@ -93,6 +93,7 @@ def message_flow(messages: pd.DataFrame, tick_s: float = 0.0) -> pd.DataFrame:
     flow = flow.take(order).drop_columns("_row")
     out = flow.to_pandas(self_destruct=True, split_blocks=True)
     del flow
+    pa.default_memory_pool().release_unused()   # the join's buffers: give them back, not keep them pooled
     for name in ("type", "drop_reason"):
         out[name] = out[name].astype("str")
     return out

@@ -52,12 +52,11 @@ def _first_drops(messages: pd.DataFrame, drop: np.ndarray) -> pa.Table:
 
 
 def _sends(messages: pd.DataFrame, send: np.ndarray) -> pa.Table:
-    return pa.table({
-        "msg_id": _col(messages, "msg_id", send, pa.int64()), "type": _col(messages, "type", send, pa.string()),
-        "src": _col(messages, "src", send, pa.int64()), "dst": _col(messages, "dst", send, pa.int64()),
-        "nbytes": _col(messages, "nbytes", send, pa.float64()), "t_send": _col(messages, T, send, pa.float64()),
-        "_row": pa.array(np.arange(int(send.sum()), dtype=np.int64)),   # ties keep the log order
-    })
+    columns = {"msg_id": ("msg_id", pa.int64()), "type": ("type", pa.string()), "src": ("src", pa.int64()),
+               "dst": ("dst", pa.int64()), "nbytes": ("nbytes", pa.float64()), "t_send": (T, pa.float64())}
+    data = {name: _col(messages, col, send, typ) for name, (col, typ) in columns.items()}
+    data["_row"] = pa.array(np.arange(int(send.sum()), dtype=np.int64))   # ties keep the log order
+    return pa.table(data)
 
 
 def _link_max_latency_s(flow: pa.Table) -> pa.Array:

@@ -90,7 +90,9 @@ def message_flow(messages: pd.DataFrame, tick_s: float = 0.0) -> pd.DataFrame:
     keys = [(name, "ascending", "at_end") for name in ("t_send", "msg_id", "dst", "_row")]
     order = pc.sort_indices(flow, sort_keys=keys)   # NaN and null last, as pandas sorts
     flow = flow.take(order).drop_columns("_row")
-    out = flow.to_pandas(self_destruct=True, split_blocks=True)
+    # self_destruct: each Arrow column is freed once copied. Not split_blocks: its zero-copy columns
+    # would be read-only, and callers may edit the flow they are given.
+    out = flow.to_pandas(self_destruct=True)
     del flow
     pa.default_memory_pool().release_unused()   # the join's buffers: give them back, not keep them pooled
     for name in ("type", "drop_reason"):

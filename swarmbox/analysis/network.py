@@ -42,8 +42,18 @@ def message_flow(messages: pd.DataFrame, tick_s: float = 0.0) -> pd.DataFrame:
 
 
 def between(flow: pd.DataFrame, t0: float, t1: float) -> pd.DataFrame:
-    """Messages sent in [t0, t1] (unified clock)."""
-    return flow[(flow["t_send"] >= t0) & (flow["t_send"] <= t1)]
+    """Messages sent in [t0, t1] (unified clock).
+
+    A flow from :func:`message_flow` is sorted by send time (unknown times last), so the window is
+    one slice of it, not a filtered copy: at 1,000 drones that copy was ~0.8 GB.
+    """
+    t = flow["t_send"]
+    known = int(t.notna().sum())
+    if t.iloc[:known].is_monotonic_increasing and t.iloc[known:].isna().all():
+        values = t.to_numpy(dtype="float64")[:known]
+        lo, hi = np.searchsorted(values, t0, side="left"), np.searchsorted(values, t1, side="right")
+        return flow.iloc[lo:max(lo, hi)]
+    return flow[(t >= t0) & (t <= t1)]
 
 
 def grouped_stats(frame: pd.DataFrame, keys: list[str], span_s: float) -> pd.DataFrame:

@@ -98,3 +98,19 @@ def formation_run(tmp_path_factory):
     manifest = run_config(run_dir, SHORT)
     assert manifest["status"] == "ok", manifest["reason"]
     return run_dir
+
+
+WINDOWS = [(2.0, 17.0), (-1.0, 99.0), (5.0, 4.0), (2.0125, 2.0125), (30.0, 40.0)]
+
+
+@pytest.mark.parametrize(("t0", "t1"), WINDOWS)
+def test_between_is_the_send_time_window(make_run, t0, t1):
+    run = load_run(make_run(drop_every={1: 4}, extra_delay_ticks={3: 2}))
+    unify(run)
+    got = flow.message_flow(run.tables["messages"], 0.025)
+    got.loc[got.index[-3:], "t_send"] = np.nan    # unknown send times sort last and are never inside
+    expected = got[(got["t_send"] >= t0) & (got["t_send"] <= t1)]
+    pd.testing.assert_frame_equal(network.between(got, t0, t1), expected)
+    shuffled = got.sample(frac=1.0, random_state=0)   # not sorted: filtered, same rows
+    pd.testing.assert_frame_equal(network.between(shuffled, t0, t1),
+                                  shuffled[(shuffled["t_send"] >= t0) & (shuffled["t_send"] <= t1)])

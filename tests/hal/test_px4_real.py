@@ -45,8 +45,8 @@ pytestmark = [pytest.mark.slow,
 def px4_fleet(homes, **kw) -> Px4Backend:
     kw.setdefault("speed", CHECK_SPEED)
     return Px4Backend(homes_ned_m=list(homes), tick_s=0.025, rng=np.random.default_rng(1),
-                      px4_build=str(BUILD), sitl={"logger": False, "start_stagger_s": 0.1, "first_instance": FIRST},
-                      **kw)
+                      px4_build=str(BUILD), **kw,
+                      sitl={"logger": False, "start_stagger_s": 0.1, "first_instance": FIRST})
 
 
 @pytest.mark.parametrize("check", [
@@ -59,7 +59,8 @@ def test_conformance_on_px4(check):
 def test_formation_on_four_px4_instances(run):
     """The default 4-drone formation flies to ``ok`` on real PX4, faster than real time."""
     manifest, d = run("backend=px4", f"backend.px4_build={BUILD}", f"run.speed={SPEED:g}",
-                      "backend.sitl.logger=false", f"backend.sitl.first_instance={FIRST}", name="px4formation")
+                      "backend.sitl.logger=false", f"backend.sitl.first_instance={FIRST}",
+                      name="px4formation")
     assert manifest["status"] == "ok", manifest["reason"] or manifest["traceback"]
     assert manifest["real_time_factor"] > 0.8 * SPEED * 0.5   # the run loop kept up with PX4
     for i in range(4):

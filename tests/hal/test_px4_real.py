@@ -117,3 +117,13 @@ def test_gnss_failure_on_px4_detected_with_the_ulog_baseline(run):
     base = rows.loc["baseline"]
     assert base["detected"] and base["localized"] and 0.0 <= base["t_f_s"] < 3.0, base
     assert rows.loc["swarmbox", "detected"], rows.loc["swarmbox"]
+
+
+def test_signing_key_refuses_a_px4_that_does_not_sign():
+    """This PX4 build (main of Aug 2025) has no MAVLink signing (no MAV_SIGN_CFG; SETUP_SIGNING is
+    ignored; it accepts commands unsigned, signed and wrongly signed alike). With ``signing_key`` set the
+    bridge must not fly it unprotected: start-up fails and names the unsigned packets."""
+    if b"MAV_SIGN_CFG" in (BUILD / "bin" / "px4").read_bytes():
+        pytest.skip("this PX4 build knows MAV_SIGN_CFG: signing end to end is not covered by this test")
+    with pytest.raises(TimeoutError, match=r"drone 0: \d+ packets unsigned or wrongly signed"):
+        px4_fleet([(0.0, 0.0, 0.0)], signing_key="swarmbox px4 signing test", connect_timeout_s=8.0)

@@ -11,7 +11,8 @@ Flies ``algo`` (default: the 9-drone RQ3 formation) on ``n`` PX4 SIH instances l
 While a run flies, ``/proc`` is sampled every second for the client (the run's Python process) and
 each PX4 process: CPU seconds over wall seconds (1.0 = one core). Per run it records the load
 average before and after, the run loop's real-time factor (``run.json``), PX4's own achieved speed
-(from the boot clock the bridge fitted: PX4 boot time against run time, ``logs/drone_i/ulog.json``)
+against the wall clock (the boot clock the bridge fitted, PX4 boot time against run time in
+``logs/drone_i/ulog.json``, times the run loop's real-time factor)
 and the packets each vehicle's link received per second of run time (``link/stats`` events).
 
     python experiments/px4_scale/run.py --out /tmp/px4_scale            # 9 x 2x, both variants, 1 rep
@@ -97,12 +98,13 @@ def link_rate(run_dir: Path, drone: int) -> float:
     return (b["rx_packets"] - a["rx_packets"]) / (stats["t_s"].iloc[-1] - stats["t_s"].iloc[-2])
 
 
-def px4_speed(run_dir: Path, drone: int, speed: float) -> float:
-    """PX4's achieved speed factor: run time advances ``b`` s per PX4 boot second (boot-clock fit)."""
+def px4_speed(run_dir: Path, drone: int, run_factor: float) -> float:
+    """PX4's achieved speed against the wall clock: run time advances ``b`` s per PX4 boot second
+    (the bridge's boot-clock fit) and the run loop ``run_factor`` s per wall second."""
     index = run_dir / "logs" / f"drone_{drone}" / "ulog.json"
-    if not index.is_file():
+    if not index.is_file() or not run_factor:
         return float("nan")
-    return speed / json.loads(index.read_text())["clock"]["b"]
+    return run_factor / json.loads(index.read_text())["clock"]["b"]
 
 
 def fly(args: argparse.Namespace, variant: str, rep: int) -> tuple[dict, list[dict]]:
@@ -124,6 +126,7 @@ def fly(args: argparse.Namespace, variant: str, rep: int) -> tuple[dict, list[di
     wall = time.monotonic() - started
     manifest = json.loads((run_dir / "run.json").read_text()) if (run_dir / "run.json").is_file() else {}
     shares = {inst: instances.share(inst) for inst in instances.first}
+    rtf = manifest.get("real_time_factor") or 0.0
     row = {"variant": variant, "rep": rep, "n": args.n, "speed": args.speed,
            "status": manifest.get("status"),
            "reason": manifest.get("reason") or err.strip().splitlines()[-1:] or "",
@@ -133,12 +136,12 @@ def fly(args: argparse.Namespace, variant: str, rep: int) -> tuple[dict, list[di
            "client_cpu": round(client.share(0), 3) if client.first else float("nan"),
            "px4_cpu_total": round(sum(shares.values()), 3),
            "px4_cpu_mean": round(float(np.mean(list(shares.values()))), 3) if shares else float("nan"),
-           "px4_speed_min": round(min((px4_speed(run_dir, i, args.speed) for i in range(args.n)),
+           "px4_speed_min": round(min((px4_speed(run_dir, i, rtf) for i in range(args.n)),
                                       default=float("nan")), 3),
            "rx_packets_per_s_mean": round(float(np.nanmean([link_rate(run_dir, i) for i in range(args.n)])),
                                           1) if manifest else float("nan")}
     per = [{"variant": variant, "rep": rep, "instance": inst, "cpu": round(share, 3),
-            "px4_speed": round(px4_speed(run_dir, inst - args.first_instance, args.speed), 3)}
+            "px4_speed": round(px4_speed(run_dir, inst - args.first_instance, rtf), 3)}
            for inst, share in sorted(shares.items())]
     return row, per
 

@@ -119,7 +119,8 @@ class Monitor:
         streamed = self.stream.close() if self.stream is not None else None
         wall = time.perf_counter() - self._started[0]
         cpu = time.process_time() - self._started[1]
-        return {"frames": self._frames, "wakeups": self._wakeups, "rerun_frames": streamed, "error": self.error,
+        return {"frames": self._frames, "wakeups": self._wakeups, "rerun_frames": streamed,
+                "error": self.error,
                 "lines_written": self._screen.lines_written if self._screen else 0,
                 "render_cpu_s": round(self._cpu_s, 4),
                 "snapshot_s": round(self.feed.snapshot_cost_s, 4), "snapshots": self.feed.snapshots,

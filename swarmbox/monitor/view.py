@@ -131,14 +131,14 @@ class DashboardView:
             shown += 1
             rep = row.report
             n, e, d = rep.pos_ned_m
-            loss = self.loss(row.drone_id)
+            lat, loss = self.latency_ms(row.drone_id), self.loss(row.drone_id)
             hist = self.history.get(row.drone_id)
             link = (("alive", "green") if row.alive
                     else ("LOST " + format(row.silent_ticks * snap.tick_s, ".1f") + "s", "bold red"))
             out.append(((f"{row.drone_id:>5}  ", "bold yellow" if row.drone_id in near else ""),
                         (f"{link[0]:<11}", link[1]),
                         (f"{_stage(rep.stage):<12}{n:8.1f}{e:8.1f}{-d + 0.0:7.1f}"
-                         f"{math.hypot(*rep.vel_ned_m_s):6.1f}{_num(self.latency_ms(row.drone_id), '{:8.1f}')}"
+                         f"{math.hypot(*rep.vel_ned_m_s):6.1f}{_num(lat, '{:8.1f}')}"
                          f"{_num(None if loss is None else 100 * loss, '{:8.1f}')}"
                          f"{_num(hist.disc_m if hist else None, '{:8.2f}')}", "")))
         for fw in snap.forwarded:

@@ -91,7 +91,7 @@ def test_links_are_coloured_by_latency_in_both_exports(exported):
 
 def test_per_drone_metric_series_carry_the_network(exported):
     series = defaultdict(list)
-    for topic, t_ns, msg in _mcap(exported):
+    for topic, _, msg in _mcap(exported):
         if topic.endswith("/metrics"):
             series[topic].append(msg)
     assert set(series) == {f"/drone_{i}/metrics" for i in range(4)}

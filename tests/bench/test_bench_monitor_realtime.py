@@ -39,6 +39,9 @@ def fly(run_dir: Path, overrides: list[str]) -> dict:
                                f"run.out_dir={run_dir}", *overrides], cwd=ROOT, env=env,
                               stdout=subprocess.PIPE, stderr=screen, timeout=600, check=False)
     assert proc.returncode == 0, proc.stdout.decode()[-2000:]
+    if "run.monitor=on" in overrides:   # the dashboard drew the swarm (from the ground's own process)
+        drawn = (run_dir.parent / f"{run_dir.name}.screen").read_text(errors="replace")
+        assert "drones 4/4 alive" in drawn and "stage TERMINATION" in drawn, drawn[-2000:]
     return json.loads((run_dir / "run.json").read_text())
 
 

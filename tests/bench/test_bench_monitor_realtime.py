@@ -12,9 +12,9 @@ terminal-compatible stream (``TTY_COMPATIBLE=1``, 110 x 40), as over SSH on a fi
 
     python -m pytest tests/bench/test_bench_monitor_realtime.py --benchmark-enable -s -m slow
 
-A plain test run (benchmarks disabled) flies one short hover with the dashboard on in each runtime,
-so CI checks that both measure; the figures in docs/monitor.md come from the enabled run above
-(the formation mission, 85 s per run).
+A plain test run (benchmarks disabled) flies one short hover with the dashboard in the ground's own
+process, so CI checks that it draws and measures (the single-process dashboard has its tmux test);
+the figures in docs/monitor.md come from the enabled run above (the formation mission, 85 s a run).
 """
 
 from __future__ import annotations
@@ -49,14 +49,15 @@ def _share(mon: dict) -> float:
     return (mon["render_cpu_s"] + mon["snapshot_s"]) / mon["process_cpu_s"]
 
 
-def measure(tmp: Path, mission: list[str], rounds: int, rates: tuple[float, ...], with_off: bool) -> dict:
+def measure(tmp: Path, mission: list[str], rounds: int, rates: tuple[float, ...], with_off: bool,
+            runtimes: tuple[str, ...] = ("processes", "single")) -> dict:
     n = 0
     procs: dict[str, list[float]] = {}
     shares: dict[str, list[float]] = {}
     frame_ms: dict[str, list[float]] = {}
     core: dict[str, list[float]] = {}
     for _ in range(rounds):
-        for runtime in ("processes", "single"):
+        for runtime in runtimes:
             modes = (["off"] if runtime == "processes" and with_off else []) + [f"{hz:g}" for hz in rates]
             for mode in modes:
                 n += 1
@@ -92,11 +93,11 @@ def measure(tmp: Path, mission: list[str], rounds: int, rates: tuple[float, ...]
 
 @pytest.mark.slow
 def test_dashboard_cost_on_real_time_runs(benchmark, tmp_path):
-    if benchmark.disabled:   # CI: both runtimes measure, one short run each (about 40 s)
-        args = (tmp_path, SHORT, 1, (2.0,), False)
+    if benchmark.disabled:   # CI: one short run of the ground in its own process (about 20 s)
+        args = (tmp_path, SHORT, 1, (2.0,), False, ("processes",))
     else:
         args = (tmp_path, [], 2, (2.0, 4.0), True)
     result = benchmark.pedantic(measure, args=args, rounds=1, iterations=1)
     benchmark.extra_info.update(result)
-    assert set(result["monitor_over_process_cpu"]) >= {"processes@2", "single@2"}
+    assert "processes@2" in result["monitor_over_process_cpu"]
     print(json.dumps(result, indent=1))

@@ -201,3 +201,34 @@ def table(sim: dict[int, pd.DataFrame], px4: dict[str, dict[int, pd.DataFrame]])
             row["rmse_ok"] = bool(row["sim_vs_px4_m"] <= row["px4_vs_px4_m"] + 0.05)
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+def overlay(sim: dict[int, pd.DataFrame], px4: dict[str, dict[int, pd.DataFrame]]):
+    """Fig. 3-style overlay: per drone the setpoint (thin grey), each PX4 flight (dashed) and the
+    sim (solid), estimated north/east over EXECUTION."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.5, 6.0))
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, s in sim.items():
+        c = colors[i % len(colors)]
+        ex = s[s["stage"] == EXECUTION]
+        ax.plot(ex["sp_e"], ex["sp_n"], "-", color="0.6", lw=0.8, label="setpoint" if i == 0 else None)
+        for k, (label, runs) in enumerate(px4.items()):
+            if i in runs:
+                f = runs[i][runs[i]["stage"] == EXECUTION]
+                ax.plot(f["pos_e"], f["pos_n"], "--", color=c, lw=1.0, alpha=0.8,
+                        label="PX4 SIH" if i == 0 and k == 0 else None)
+        ax.plot(ex["pos_e"], ex["pos_n"], "-", color=c, lw=1.4, label="sim" if i == 0 else None)
+        ax.annotate(str(i), (float(ex["pos_e"].iloc[0]), float(ex["pos_n"].iloc[0])), ha="center",
+                    va="center", fontsize=9, bbox={"boxstyle": "circle", "fc": "white", "ec": c})
+    ax.set_xlabel("east (m)")
+    ax.set_ylabel("north (m)")
+    ax.set_aspect("equal")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper right")
+    ax.set_title("RQ2 formation: sim vs PX4 SIH, estimated tracks")
+    return fig

@@ -1,10 +1,18 @@
 """A PX4-like cascaded multicopter controller, vectorized over a fleet.
 
 position P → velocity setpoint (saturated horizontally and vertically) → velocity PID with PX4's
-anti-reset windup → acceleration setpoint (saturated by the acceleration and tilt limits). As in
-PX4, the airframe's drag is left to the velocity integrator: on a moving setpoint the vehicle trails
-by the position loop's 1/MPC_XY_P plus what drag costs while the integrator catches up (the RQ2 lag,
-docs/fidelity.md). ``vel_drag_ff`` (0 in PX4) feeds a fraction of the drag forward instead. Every kind
+anti-reset windup → acceleration setpoint (saturated by the acceleration and tilt limits). Where it
+may differ from PX4 (``conf/backend/sim.yaml`` vs ``sim_px4.yaml``, docs/fidelity.md):
+
+- ``vel_drag_ff``: the default feeds the airframe's linear drag forward at the velocity setpoint, so
+  the vehicle settles on a saturated velocity setpoint without overshooting the speed limits; PX4
+  (0) leaves drag to the velocity integrator, so on a moving setpoint the vehicle trails by the
+  position loop's 1/MPC_XY_P plus what drag costs while the integrator catches up (the RQ2 lag);
+- ``mc_roll_p``: PX4's tilt follows its setpoint with time constant 1/MC_ROLL_P (0: at once);
+- ``acc_hor_max_offboard``: PX4 limits offboard setpoints by the tilt only, MPC_ACC_HOR_MAX acts in
+  its automatic modes.
+
+Every kind
 of target is one column of the same arrays, so one :meth:`CascadedController.update` serves the whole
 fleet with no per-drone Python:
 
@@ -115,7 +123,8 @@ class CascadedController:
     def set_offboard_limits(self, i: int, offboard: bool) -> None:
         """Horizontal acceleration limit: the tilt limit alone on offboard setpoints (PX4's
         PositionControl), MPC_ACC_HOR_MAX as well in the automatic modes."""
-        self._ah_max[i] = self.p.acc_tilt_limit_m_s2 if offboard else self.p.acc_hor_limit_m_s2
+        tilt_only = offboard and not self.p.acc_hor_max_offboard
+        self._ah_max[i] = self.p.acc_tilt_limit_m_s2 if tilt_only else self.p.acc_hor_limit_m_s2
 
     def set_takeoff_ramp(self, i: int, up_m_s: float) -> None:
         """Limit drone ``i``'s climb rate to ``up_m_s`` (the takeoff ramp); ``inf`` lifts the limit."""

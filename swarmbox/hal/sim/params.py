@@ -18,10 +18,10 @@ GRAVITY_M_S2 = 9.80665
 class SimParams:
     """Every tunable of :class:`swarmbox.hal.sim.backend.SimBackend`, with its unit in the name."""
 
-    # airframe (PX4 SIH quadrotor: SIH_MASS, SIH_KDV)
-    mass_kg: float = 1.0
+    # airframe (x500-like; backend=sim_px4: PX4's SIH quadrotor, SIH_MASS and SIH_KDV)
+    mass_kg: float = 1.5
     radius_m: float = 0.3                 # collision radius
-    drag_n_s_m: float = 1.0               # linear drag: force = -drag * velocity
+    drag_n_s_m: float = 0.3               # linear drag: force = -drag * velocity
     elasticity: float = 0.3               # restitution of drone shapes (pymunk multiplies both shapes')
     friction: float = 0.5
     vertical_separation_m: float = 1.0    # contacts are ignored above this altitude gap
@@ -45,10 +45,11 @@ class SimParams:
     mpc_yawrauto_max_deg_s: float = 45.0
     mpc_land_speed_m_s: float = 0.7
     mpc_tko_speed_m_s: float = 1.5
-    com_spoolup_time_s: float = 1.0       # COM_SPOOLUP_TIME: after arming, motors spool up this long
-    mpc_tko_ramp_t_s: float = 3.0         # MPC_TKO_RAMP_T: then the climb-rate limit ramps up this long
-    mc_roll_p: float = 4.0                # 1/s, attitude P (MC_ROLL_P = MC_PITCH_P): tilt time constant 1/P; 0: none
-    vel_drag_ff: float = 0.0              # fraction of the drag fed forward at the velocity setpoint (PX4: 0)
+    com_spoolup_time_s: float = 1.0       # COM_SPOOLUP_TIME: with a ramp, no lift this long after arming
+    mpc_tko_ramp_t_s: float = 0.0         # MPC_TKO_RAMP_T (PX4: 3 s): climb-rate limit ramp; 0: none
+    mc_roll_p: float = 0.0                # 1/s, MC_ROLL_P (PX4: 4): tilt time constant 1/P; 0: instant tilt
+    vel_drag_ff: float = 1.0              # fraction of the drag fed forward at the velocity setpoint (PX4: 0)
+    acc_hor_max_offboard: bool = True     # MPC_ACC_HOR_MAX limits offboard setpoints too (PX4: tilt only)
     # automatic modes
     takeoff_acceptance_m: float = 0.3     # TAKEOFF switches to HOLD within this of the target altitude
     hold_brake_speed_m_s: float = 0.2     # HOLD brakes (velocity 0) until this slow, then holds position

@@ -217,7 +217,7 @@ def overlay(sim: dict[int, pd.DataFrame], px4: dict[str, dict[int, pd.DataFrame]
         c = colors[i % len(colors)]
         ex = s[s["stage"] == EXECUTION]
         ax.plot(ex["sp_e"], ex["sp_n"], "-", color="0.6", lw=0.8, label="setpoint" if i == 0 else None)
-        for k, (label, runs) in enumerate(px4.items()):
+        for k, runs in enumerate(px4.values()):
             if i in runs:
                 f = runs[i][runs[i]["stage"] == EXECUTION]
                 ax.plot(f["pos_e"], f["pos_n"], "--", color=c, lw=1.0, alpha=0.8,

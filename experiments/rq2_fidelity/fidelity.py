@@ -196,6 +196,7 @@ def table(sim: dict[int, pd.DataFrame], px4: dict[str, dict[int, pd.DataFrame]])
                 "px4_rmse_sp_m": float(np.mean([rmse_setpoint(r) for r in runs])),
                 "sim_vs_px4_m": float(np.mean([rmse_flights(s, r) for r in runs])),
                 "px4_vs_px4_m": float(np.mean([rmse_flights(x, y) for x, y in pairs])) if pairs else np.nan,
+                "px4_pairs_m": "/".join(f"{rmse_flights(x, y):.2f}" for x, y in pairs),
             })
             row["lag_ok"] = abs(row["sim_lag_s"] - row["px4_lag_s"]) <= 0.1
             row["rmse_ok"] = bool(row["sim_vs_px4_m"] <= row["px4_vs_px4_m"] + 0.05)

@@ -152,3 +152,23 @@ def test_sim_px4_lag_is_within_a_tenth_of_a_second_of_px4(rq2, tmp_path):
     assert (table["sim_lag_s"] - table["px4_lag_s"]).abs().max() < 0.2, table
     default = fidelity.table(_sim_flights(flights, tmp_path, "sim"), ref)
     assert (table["sim_vs_px4_m"] < default["sim_vs_px4_m"]).all()   # closer to PX4 than the default
+
+
+def test_same_seed_same_flight_with_px4_structure():
+    def flight(seed: int) -> list[tuple]:
+        b = SimBackend(homes_ned_m=[(0.0, 0.0, 0.0), (3.0, 0.0, 0.0)], tick_s=TICK_S,
+                       rng=np.random.default_rng(seed), **PX4)
+        f = Flight(b)
+        f.run_until(lambda: f.tel(0).ready_to_arm and f.tel(1).ready_to_arm, 5.0, "ready")
+        for v in b.vehicles:
+            v.arm()
+        out = []
+        for k in range(400):   # spool-up, takeoff ramp, then a leg with the tilt lag
+            for i, v in enumerate(b.vehicles):
+                v.setpoint(Setpoint.position(3.0 * i + (8.0 if k > 200 else 0.0), 0.0, -3.0))
+            f.step()
+            out.append(tuple(b.true_pos_ned_m.ravel()) + tuple(f.tel(1).pos_ned_m))
+        return out
+
+    a, again, other = flight(5), flight(5), flight(6)
+    assert a == again and a != other

@@ -40,6 +40,7 @@ CMD_LAND = mavlink.MAV_CMD_NAV_LAND                             # 21
 CMD_RTL = mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH                  # 20
 CMD_SET_MESSAGE_INTERVAL = mavlink.MAV_CMD_SET_MESSAGE_INTERVAL  # 511
 CMD_REQUEST_MESSAGE = mavlink.MAV_CMD_REQUEST_MESSAGE           # 512
+CMD_INJECT_FAILURE = mavlink.MAV_CMD_INJECT_FAILURE             # 420
 RESULT_ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 RESULT_TEMPORARILY_REJECTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
 RESULT_DENIED = mavlink.MAV_RESULT_DENIED
@@ -50,7 +51,8 @@ RESULT_NAMES = {v: k[len("MAV_RESULT_"):].lower() for k, v in vars(mavlink).item
                 if k.startswith("MAV_RESULT_") and k != "MAV_RESULT_ENUM_END" and isinstance(v, int)}
 COMMAND_NAMES = {CMD_SET_MODE: "set_mode", CMD_ARM_DISARM: "arm_disarm", CMD_TAKEOFF: "takeoff",
                  CMD_LAND: "land", CMD_RTL: "return_to_launch",
-                 CMD_SET_MESSAGE_INTERVAL: "set_message_interval", CMD_REQUEST_MESSAGE: "request_message"}
+                 CMD_SET_MESSAGE_INTERVAL: "set_message_interval", CMD_REQUEST_MESSAGE: "request_message",
+                 CMD_INJECT_FAILURE: "inject_failure"}
 PREARM_CHECK_BIT = mavlink.MAV_SYS_STATUS_PREARM_CHECK          # SYS_STATUS health: ready to arm
 ARMED_FLAG = mavlink.MAV_MODE_FLAG_SAFETY_ARMED                 # HEARTBEAT base_mode
 CUSTOM_MODE_FLAG = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED

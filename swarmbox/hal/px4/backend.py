@@ -201,6 +201,11 @@ class Px4Backend:
             print(f"px4 backend: could not collect the vehicles' logs: {type(exc).__name__}: {exc}",
                   file=sys.stderr)
 
+    def inject_failure(self, i: int, unit: str, kind: str, instance: int = 0) -> None:
+        """Vehicle ``i``'s autopilot fails ``unit`` itself (MAV_CMD_INJECT_FAILURE; ``kind="ok"``
+        ends it). The answer arrives as a ``fault/inject_accepted`` or ``inject_refused`` event."""
+        self.vehicles[i].inject_failure(unit, kind, instance)
+
     # ---- measurements ---------------------------------------------------------------------------
     @property
     def local_ports(self) -> list[int]:

@@ -24,6 +24,7 @@ from typing import Any
 from swarmbox.api import Setpoint, SetpointVerdict, Telemetry
 from swarmbox.hal.mavlink.codec import (
     CMD_ARM_DISARM,
+    CMD_INJECT_FAILURE,
     CMD_LAND,
     CMD_REQUEST_MESSAGE,
     CMD_RTL,
@@ -52,6 +53,7 @@ from swarmbox.hal.mavlink.codec import (
     mode_name,
     px4_main_sub,
 )
+from swarmbox.hal.mavlink.failure import FailureInjector, FailureRequest
 from swarmbox.hal.mavlink.frames import VehicleFrame
 from swarmbox.hal.mavlink.link import Command, CommandTracker, VehicleLink
 from swarmbox.hal.px4.linkreport import LinkReport
@@ -66,7 +68,7 @@ _ZERO3 = (0.0, 0.0, 0.0)
 WARNING_SEVERITY = 4          # STATUSTEXT at this severity or worse becomes an event
 STATE_GRACE_S = 0.3           # a HEARTBEAT this soon after an accepted command may predate it
 SILENCE_AFTER = 20            # unrequested packets of one id before asking PX4 to stop them
-_NOT_CRITICAL = frozenset((CMD_SET_MESSAGE_INTERVAL, CMD_REQUEST_MESSAGE))
+_NOT_CRITICAL = frozenset((CMD_SET_MESSAGE_INTERVAL, CMD_REQUEST_MESSAGE, CMD_INJECT_FAILURE))
 WANTED = frozenset(MSG[m] for m in (
     "HEARTBEAT", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "GPS_RAW_INT", "SYS_STATUS",
     "EXTENDED_SYS_STATE", "COMMAND_ACK", "STATUSTEXT", "HIL_STATE_QUATERNION"))
@@ -84,6 +86,7 @@ class Px4Vehicle:
         self._cmds = CommandTracker(self._send_command, self._command_report, cfg.command_timeout_s,
                                     cfg.command_retries, self._command_timed_out, self._command_failed)
         self.failure = ""                          # the latest flight command the autopilot refused
+        self.failures = FailureInjector(lambda cmd: self._cmds.submit(cmd, self._now), emit)
         self._on_regain: Command | None = None      # the last command lost with the link
         self._now = 0.0
         self.connected = self.link_lost = False
@@ -176,6 +179,10 @@ class Px4Vehicle:
         self._stop_offboard()
         main, sub = px4_main_sub(MODE_HOLD)
         self._submit(CMD_SET_MODE, (CUSTOM_MODE_FLAG, main, sub), lambda: self._set_mode(MODE_HOLD))
+
+    def inject_failure(self, unit: str, kind: str, instance: int = 0) -> None:
+        """Ask the autopilot to fail ``unit`` (``kind="ok"`` ends it): MAV_CMD_INJECT_FAILURE."""
+        self.failures.inject(FailureRequest(unit, kind, instance))
 
     # ---- servicing (called by the backend every step) -----------------------------------------
     def service(self, now_s: float) -> None:
@@ -312,6 +319,8 @@ class Px4Vehicle:
         Not a disarm refused in the air, nor a command lost with the link (resent when it returns)."""
         if (cmd.command in _NOT_CRITICAL or (cmd.command == CMD_ARM_DISARM and cmd.params[:1] == (0.0,))
                 or (self.link_lost and result == "no ack")):
+            if cmd.command == CMD_INJECT_FAILURE:
+                self.failures.on_failed(cmd, result)
             return
         self.failure = f"autopilot refused {cmd.name} ({result} after {cmd.tries} tries)"
         self._emit("failure", "command_failed", {"command": cmd.name, "result": result, "tries": cmd.tries,

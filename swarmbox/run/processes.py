@@ -87,6 +87,26 @@ def autopilots(cfg: DictConfig, m: Any, run_dir: Path) -> tuple[Any, dict[str, d
                   for k, i in enumerate(m.drone_ids)}
 
 
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:   # a zombie (ended, not yet reaped by its parent) is not alive
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False
+
+
+def _signal(pid: int, sig: signal.Signals) -> None:
+    try:
+        os.kill(pid, sig)
+    except ProcessLookupError:
+        pass
+
+
 class NodeSet:
     """The node processes of one run."""
 
@@ -95,6 +115,7 @@ class NodeSet:
         self.nodes_dir = run_dir / "nodes"
         self.ids = [GROUND_ID, *drone_ids]
         self.procs: dict[int, subprocess.Popen[bytes]] = {}
+        self.restarts: dict[int, int] = {}   # node -> pid of a process started again by someone else
 
     def start(self, secrets_env: dict[str, str], vehicles: dict[str, dict[str, Any]]) -> None:
         self.nodes_dir.mkdir(parents=True, exist_ok=True)
@@ -139,14 +160,36 @@ class NodeSet:
         os.replace(tmp, self.nodes_dir / "start.json")
         return epoch
 
+    def adopt_restarts(self) -> None:
+        """Note node processes started again (by hand or a supervisor) after theirs ended.
+
+        A restarted node writes its own pid to ``nodes/<node>.ready``; the launcher then waits for
+        it at the end as for its own children, and stops it the same way.
+        """
+        for i, p in self.procs.items():
+            if p.poll() is None:
+                continue
+            try:
+                pid = int((self.nodes_dir / f"{node_name(i)}.ready").read_text())
+            except (OSError, ValueError):
+                continue
+            if pid != p.pid and _alive(pid):
+                self.restarts[i] = pid
+
+    def _running(self) -> bool:
+        self.adopt_restarts()
+        return (any(p.poll() is None for p in self.procs.values())
+                or any(_alive(pid) for pid in self.restarts.values()))
+
     def wait_ground(self) -> None:
         ground = self.procs[GROUND_ID]
         while ground.poll() is None:
+            self.adopt_restarts()
             wall.sleep(POLL_S)
 
     def finish_agents(self, timeout_s: float) -> None:
         deadline = wall.monotonic() + timeout_s
-        while any(p.poll() is None for p in self.procs.values()) and wall.monotonic() < deadline:
+        while self._running() and wall.monotonic() < deadline:
             wall.sleep(POLL_S)
         self.stop()
 
@@ -155,6 +198,8 @@ class NodeSet:
         for p in self.procs.values():
             if p.poll() is None:
                 p.send_signal(signal.SIGTERM)
+        for pid in self.restarts.values():
+            _signal(pid, signal.SIGTERM)
         deadline = wall.monotonic() + grace_s
         for p in self.procs.values():
             try:
@@ -162,6 +207,10 @@ class NodeSet:
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()
+        for pid in self.restarts.values():
+            while _alive(pid) and wall.monotonic() < deadline:
+                wall.sleep(POLL_S)
+            _signal(pid, signal.SIGKILL)
 
     def results(self) -> dict[str, dict[str, Any]]:
         out = {}
@@ -173,7 +222,10 @@ class NodeSet:
                 res = {"node": name, "status": "failed", "reason": "no outcome written"}
             code = p.returncode
             res["exit_code"] = code
-            if code is not None and code < 0:
+            if i in self.restarts:   # the outcome is the restarted process's; the first one's exit stays
+                res["first_exit"] = (f"killed by {signal.Signals(-code).name}" if code is not None and code < 0
+                                     else f"exit code {code}")
+            elif code is not None and code < 0:
                 res.update(status="killed", reason=f"killed by {signal.Signals(-code).name}")
             out[name] = res
         return out
@@ -191,6 +243,8 @@ def outcome(results: dict[str, dict[str, Any]]) -> tuple[str, str]:
     for name, r in results.items():
         if name != node_name(GROUND_ID) and r["status"] in ("killed", "failed"):
             parts.append(f"{name} {r['status']}: {r['reason']}")
+        elif r.get("first_exit"):
+            parts.append(f"{name} {r['first_exit']}, restarted: {r['status']}")
     return status, "; ".join(p for p in parts if p)
 
 

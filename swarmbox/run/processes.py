@@ -28,7 +28,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from swarmbox.core.messages import GROUND_ID
 from swarmbox.record.schema import SCHEMA_VERSION, node_name
-from swarmbox.run import build, mission, node_faults
+from swarmbox.run import build, mission, node_faults, vehicle_host
 
 _PACKAGE_ROOT = Path(__file__).resolve().parents[2]
 #: The MAVLink 2 signing key of the vehicle links (``backend.signing_key``), handed to agent processes.
@@ -54,6 +54,14 @@ def free_ports(n: int) -> list[int]:
     finally:
         for s in socks:
             s.close()
+
+
+def child_env() -> dict[str, str]:
+    """The environment of a process the launcher starts: this package first, no inherited keys."""
+    env = dict(os.environ)
+    env.pop(MAVLINK_KEY_ENV, None)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(_PACKAGE_ROOT), env.get("PYTHONPATH")]))
+    return env
 
 
 def _tail(path: Path) -> str:
@@ -123,10 +131,8 @@ class NodeSet:
         locators = {node_name(i): f"tcp/127.0.0.1:{p}" for i, p in zip(self.ids, ports, strict=True)}
         plan = {"mission_id": secrets.token_hex(6), "locators": locators, "vehicles": vehicles}
         (self.nodes_dir / "plan.json").write_text(json.dumps(plan, indent=2))
-        env = dict(os.environ)
-        env.pop(MAVLINK_KEY_ENV, None)
+        env = child_env()
         env.update(secrets_env)
-        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(_PACKAGE_ROOT), env.get("PYTHONPATH")]))
         for i in self.ids:
             role = ["ground"] if i == GROUND_ID else ["agent", "--drone", str(i)]
             with open(self.nodes_dir / f"{node_name(i)}.log", "wb") as out:
@@ -284,9 +290,13 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
     try:
         m = mission.load(cfg, build.rng_for(int(cfg.seed), "dataset"))
         node_faults.check(cfg)
+        vehicle_host.check(cfg)
         manifest.update(n_drones=m.swarm_size, nodes=[node_name(i) for i in [GROUND_ID, *m.drone_ids]])
         nodes = NodeSet(cfg, run_dir, list(m.drone_ids))
         sitl, vehicles = autopilots(cfg, m, run_dir)
+        if sitl is None:
+            nodes.nodes_dir.mkdir(parents=True, exist_ok=True)
+            sitl, vehicles = vehicle_host.start(cfg, m, run_dir, child_env())
         nodes.start(secrets_env, vehicles)
         nodes.wait_ready(float(cfg.run.net.ready_timeout_s))
         start = nodes.go(float(cfg.run.net.start_delay_s))
@@ -307,6 +317,8 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
             manifest["node_results"] = manifest["node_results"] or nodes.results()
         if sitl is not None:
             sitl.stop()
+            if getattr(sitl, "stats", None):
+                manifest["vehicle_host"] = sitl.stats
         elapsed = max(wall.time() - start, 1e-9)
         manifest.update(wall_time_s=elapsed, real_time_factor=manifest["sim_time_s"] / elapsed)
         write_atomic(run_dir / "run.json", json.dumps(manifest, indent=2, sort_keys=True))

@@ -6,7 +6,8 @@
 Each size is one real run (ground + N agent processes + one mavsim host flying the N vehicles,
 ``--vehicle-host agent``: N mavsim processes instead; Zenoh on 127.0.0.1, 1x real time); a size
 of 36 flies ``mission=formation36``. Runs are kept under ``--out`` (one directory per size; an
-existing run is never overwritten), so the script can be repeated with a new ``--out``. Figures come from each node's ``nodes/<node>.json``: CPU time over the node's wall
+existing run is never overwritten), so the script can be repeated with a new ``--out``.
+Figures come from each node's ``nodes/<node>.json``: CPU time over the node's wall
 time, peak resident memory (VmHWM) and the signed frames it sent and received per second. The
 load average is printed with the table, since the machine may be shared.
 """

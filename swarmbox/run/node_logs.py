@@ -28,7 +28,8 @@ def set_aside(run_dir: Path, name: str) -> list[Path]:
         os.replace(logs, seg_root / str(len(list(seg_root.iterdir()))))
     if not seg_root.is_dir():
         return []
-    return sorted((p for p in seg_root.iterdir() if p.is_dir() and p.name.isdigit()), key=lambda p: int(p.name))
+    segs = (p for p in seg_root.iterdir() if p.is_dir() and p.name.isdigit())
+    return sorted(segs, key=lambda p: int(p.name))
 
 
 def append_segments(run_dir: Path, name: str, segments: list[Path]) -> None:
@@ -36,7 +37,7 @@ def append_segments(run_dir: Path, name: str, segments: list[Path]) -> None:
     if not segments:
         return
     logs = run_dir / "logs" / name
-    tables = {p.name for seg in segments for p in seg.glob("*.parquet")} | {p.name for p in logs.glob("*.parquet")}
+    tables = {p.name for seg in [*segments, logs] for p in seg.glob("*.parquet")}
     for file in sorted(tables):
         parts = [pq.read_table(seg / file) for seg in segments if (seg / file).exists()]
         if (logs / file).exists():

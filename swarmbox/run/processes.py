@@ -229,7 +229,8 @@ class NodeSet:
             code = p.returncode
             res["exit_code"] = code
             if i in self.restarts:   # the outcome is the restarted process's; the first one's exit stays
-                res["first_exit"] = (f"killed by {signal.Signals(-code).name}" if code is not None and code < 0
+                killed = code is not None and code < 0
+                res["first_exit"] = (f"killed by {signal.Signals(-code).name}" if killed
                                      else f"exit code {code}")
             elif code is not None and code < 0:
                 res.update(status="killed", reason=f"killed by {signal.Signals(-code).name}")

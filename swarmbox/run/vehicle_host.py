@@ -81,8 +81,8 @@ def start(cfg: DictConfig, m: Any, run_dir: Path, env: dict[str, str]) -> tuple[
     """
     if check(cfg) == "agent" or cfg.backend.get("name") != "mavsim":
         return None, {}
-    from swarmbox.hal.mavsim.backend import MavsimLauncher, MavsimOptions
     from swarmbox.hal.mavlink.frames import GeoFrame
+    from swarmbox.hal.mavsim.backend import MavsimLauncher, MavsimOptions
 
     b = OmegaConf.to_container(cfg.backend, resolve=True)
     sim = {k: v for k, v in (b.get("sim") or {}).items() if v is not None}

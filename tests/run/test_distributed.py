@@ -245,8 +245,9 @@ def test_shared_vehicle_host_flies_every_agent_from_one_process(tmp_path):
         plan = wait_started(run_dir)
         host_pid = int(subprocess.run(["pgrep", "-f", f"mavsim.host --spec {run_dir}"], capture_output=True,
                                       text=True).stdout.split()[0])
-        vehicles = [subprocess.run(["pgrep", "-f", f"mavsim.process .*--parent-pid {plan['pids'][f'drone_{i}']}"],
-                                   capture_output=True, text=True).stdout.strip() for i in range(4)]
+        patterns = [f"mavsim.process .*--parent-pid {plan['pids'][f'drone_{i}']}" for i in range(4)]
+        vehicles = [subprocess.run(["pgrep", "-f", pat], capture_output=True, text=True).stdout.strip()
+                    for pat in patterns]
         manifest = finish(proc, run_dir)
     finally:
         proc.kill()

@@ -118,5 +118,6 @@ def test_a_restarted_node_appends_its_rows_after_the_earlier_segments(tmp_path):
     segments = node_logs.set_aside(tmp_path, "drone_3")  # restarted once more
     process_writes(20.0)
     node_logs.append_segments(tmp_path, "drone_3", segments)
-    assert pq.read_table(logs / "events.parquet").column("t_s").to_pylist() == [0.0, 1.0, 10.0, 11.0, 20.0, 21.0]
+    times = pq.read_table(logs / "events.parquet").column("t_s").to_pylist()
+    assert times == [0.0, 1.0, 10.0, 11.0, 20.0, 21.0]
     assert node_logs.set_aside(tmp_path / "elsewhere", "drone_3") == []

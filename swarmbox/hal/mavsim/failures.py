@@ -8,7 +8,7 @@ one-vehicle :class:`~swarmbox.hal.sim.backend.SimBackend` under it:
 |---|---|---|
 | gps | off | no more fixes: the estimator coasts on its inertial prediction |
 | gps | stuck | every fix repeats the last one (noise off), wherever the vehicle goes |
-| gps | wrong | every fix lands ``WRONG_OFFSET_NED_M`` (20 m north) from the truth, a constant multipath-like error |
+| gps | wrong | every fix ``WRONG_OFFSET_NED_M`` (20 m north) off the truth, a constant error |
 | gps | ok | the receiver is healthy again (all of the above undone) |
 | motor | off | motors cut for good: the sim backend's crash (telemetry frozen; ``ok`` cannot undo it) |
 | motor | slow | thrust margin halved: the accelerations the controller can command are scaled by 0.5 |

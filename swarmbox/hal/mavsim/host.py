@@ -67,14 +67,16 @@ class Host:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m swarmbox.hal.mavsim.host", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m swarmbox.hal.mavsim.host",
+                                 description=__doc__.split("\n\n")[0])
     ap.add_argument("--spec", type=Path, required=True)
     ap.add_argument("--parent-pid", type=int, default=None)
     ap.add_argument("--max-wall-s", type=float, default=3600.0)
     args = ap.parse_args(argv)
     try:
         spec = json.loads(args.spec.read_text())
-        host = Host([MavsimProgram(parse_args(v)) for v in spec["vehicles"]], args.parent_pid, args.max_wall_s)
+        programs = [MavsimProgram(parse_args(v)) for v in spec["vehicles"]]
+        host = Host(programs, args.parent_pid, args.max_wall_s)
     except (ValueError, TypeError, KeyError, OSError) as exc:
         print(f"mavsim host: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 2

@@ -3,8 +3,8 @@
 The launcher starts it before the nodes (the vehicles stand for autopilots, which exist apart from
 the companion computers), on one free UDP port of 127.0.0.1 per vehicle for the agent's bridge;
 each agent then connects to its vehicle (``plan.json`` ``vehicles``) as to a running autopilot.
-Because the vehicle outlives its agent, an agent killed and restarted finds its drone where the
-failsafe left it. The host runs :mod:`swarmbox.hal.mavsim.host`; its output is in
+The vehicle outlives its agent: an agent killed and restarted finds its drone where the
+failsafe left it (untested: the rejoin test uses one vehicle per agent). The host runs :mod:`swarmbox.hal.mavsim.host`; its output is in
 ``nodes/mavsim_host.log``.
 """
 

@@ -237,27 +237,3 @@ def test_agent_killed_in_execution_restarts_rejoins_and_flies_again(tmp_path):
     assert "EXECUTION" in stages and stages[-1] == "TERMINATION"
     assert (events(run_dir, "drone_3")["name"] == "process_restarted").any()
 
-
-def test_shared_vehicle_host_flies_every_agent_from_one_process(tmp_path):
-    run_dir = tmp_path / "run"
-    proc = launch(run_dir, "algo=hover", "mission=hover", "run.net.vehicle_host=shared")
-    try:
-        plan = wait_started(run_dir)
-        host_pid = int(subprocess.run(["pgrep", "-f", f"mavsim.host --spec {run_dir}"], capture_output=True,
-                                      text=True).stdout.split()[0])
-        patterns = [f"mavsim.process .*--parent-pid {plan['pids'][f'drone_{i}']}" for i in range(4)]
-        vehicles = [subprocess.run(["pgrep", "-f", pat], capture_output=True, text=True).stdout.strip()
-                    for pat in patterns]
-        manifest = finish(proc, run_dir)
-    finally:
-        proc.kill()
-    assert manifest["status"] == "ok", manifest["_console"][-3000:]
-    assert vehicles == [""] * 4                                # no per-agent vehicle processes
-    assert plan["vehicles"]["drone_2"]["system_ids"] == [3]
-    assert manifest["vehicle_host"]["vehicles"] == 4 and manifest["vehicle_host"]["vmhwm_mb"] > 0
-    log = (run_dir / "nodes" / "mavsim_host.log").read_text()
-    assert log.count("mavsim host: system") == 4 and "4 vehicles stopped" in log
-    assert host_pid > 0
-    for i in range(4):
-        state = pd.read_parquet(run_dir / "logs" / f"drone_{i}" / "state.parquet")
-        assert (-state["pos_d"]).max() > 1.5 and state["armed"].iloc[-1] == False  # noqa: E712

@@ -30,6 +30,9 @@ from swarmbox.run.processes import free_ports
 
 pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parents[2]
+#: the formation, shortened for CI: circle from 5 s of EXECUTION, one lap in ~25 s
+SHORT_FORMATION = ["algo.params.start_s=5", "algo.params.angular_rate_rad_s=0.25",
+                   "algo.params.complete_after_s=32"]
 
 
 def launch(run_dir: Path, *overrides: str, key: str | None = None) -> subprocess.Popen:
@@ -203,7 +206,7 @@ def test_agent_killed_in_execution_restarts_rejoins_and_flies_again(tmp_path):
     (same --drone, same run directory): the ground logs ``inferior_rejoined``, the drone arms and
     climbs again, the run ends ok and its record says what happened."""
     run_dir, key = tmp_path / "run", os.urandom(16).hex()
-    proc = launch(run_dir, key=key)
+    proc = launch(run_dir, *SHORT_FORMATION, key=key)
     again = None
     try:
         plan = wait_started(run_dir)

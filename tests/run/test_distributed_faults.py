@@ -13,12 +13,9 @@ import pytest
 from swarmbox.analysis import diagnosis as dg
 from swarmbox.analysis.load import load_run
 from swarmbox.analysis.unify import unify
-from tests.run.test_distributed import events, finish, launch, wait_started
+from tests.run.test_distributed import SHORT_FORMATION, events, finish, launch, wait_started
 
 pytestmark = pytest.mark.slow
-#: the formation, shortened for CI: circle from 5 s of EXECUTION, one lap in ~25 s
-SHORT_FORMATION = ["algo.params.start_s=5", "algo.params.angular_rate_rad_s=0.25",
-                   "algo.params.complete_after_s=32"]
 
 
 def test_gps_failure_on_one_agent_is_diagnosed_on_that_drone(tmp_path):

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import pytest
 
 from swarmbox.hal.mavlink import codec as mc
 from swarmbox.hal.mavlink.failure import CMD_INJECT_FAILURE, FailureInjector, FailureRequest
 from swarmbox.hal.mavlink.link import CommandTracker
+from swarmbox.hal.mavlink.paramset import PARAM_INT32, ParamSetter, param_from_wire, param_to_wire
 
 
 class Autopilot:
@@ -44,7 +47,8 @@ def test_accepted_failure_is_active_until_ended():
     assert ap.sent == [(CMD_INJECT_FAILURE, (4.0, 1.0, 0.0))]
     ap.ack(mc.RESULT_ACCEPTED)
     assert ap.injector.active == {("gps", 0): "off"}
-    assert ap.events[-1] == ("fault", "inject_accepted", {"unit": "gps", "type": "off", "instance": 0})
+    assert ap.events[-1] == ("fault", "inject_accepted", {"unit": "gps", "type": "off", "instance": 0,
+                                                   "via": "MAV_CMD_INJECT_FAILURE"})
     ap.injector.end("gps")
     ap.ack(mc.RESULT_ACCEPTED)
     assert ap.injector.active == {} and ap.sent[-1][1] == (4.0, 0.0, 0.0)
@@ -75,3 +79,45 @@ def test_injections_of_different_units_queue_in_order():
     ap.ack(mc.RESULT_UNSUPPORTED)
     assert [e[1] for e in ap.events] == ["inject_accepted", "inject_refused"]
     assert ap.events[1][2]["unit"] == "baro" and ap.events[1][2]["result"] == "unsupported"
+
+
+class Value(NamedTuple):
+    name: str
+    value: float
+
+
+def test_param_setter_confirms_by_echo_and_gives_up_with_what_it_saw():
+    sent: list[tuple[str, float, int]] = []
+    outcome: list[tuple[bool, str]] = []
+    ps = ParamSetter(lambda n, v, k: sent.append((n, v, k)) or True, timeout_s=1.0, retries=1)
+    ps.set("SIM_GPS_USED", 0, 0.0, lambda ok, why: outcome.append((ok, why)))
+    ps.on_value(Value("SIM_GPS_USED", 10.0))      # an older value: not yet
+    ps.service(1.0)                                # re-sent
+    ps.on_value(Value("SIM_GPS_USED", 0.0))
+    assert outcome == [(True, "")] and len(sent) == 2 and sent[0][2] == PARAM_INT32
+    ps.set("SIM_GPS_USED", 10, 2.0, lambda ok, why: outcome.append((ok, why)))
+    ps.on_value(Value("SIM_GPS_USED", 0.0))
+    for now in (3.0, 4.0, 5.0):
+        ps.service(now)
+    assert outcome[-1] == (False, "SIM_GPS_USED=10 not confirmed after 2 tries (it holds 0)")
+    assert param_from_wire(param_to_wire(10, PARAM_INT32), PARAM_INT32) == 10.0
+
+
+def test_gnss_failure_through_sim_gps_used_when_asked():
+    writes: list[tuple[str, float]] = []
+    events: list[tuple[str, str, dict]] = []
+
+    def set_param(name, value, done):
+        writes.append((name, value))
+        done(True, "")
+
+    inj = FailureInjector(lambda cmd: pytest.fail("no command expected"),
+                          lambda kind, name, data: events.append((kind, name, data)), set_param,
+                          gnss_via_param=True)
+    inj.inject(FailureRequest("gps", "off"))
+    assert writes == [("SIM_GPS_USED", 0)] and inj.active == {("gps", 0): "off"}
+    assert events[-1][2]["via"] == "SIM_GPS_USED"
+    inj.end("gps")
+    assert writes[-1] == ("SIM_GPS_USED", 10) and not inj.active
+    inj.inject(FailureRequest("gps", "stuck"))
+    assert events[-1][1] == "inject_refused" and events[-1][2]["result"] == "unsupported"

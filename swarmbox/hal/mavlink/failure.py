@@ -13,6 +13,14 @@ bounded retry) and reports what the autopilot answered as ``fault`` events:
 
 A refused injection never aborts the drone: the fault simply did not happen, and the event says so.
 The vehicle side (mavsim) decodes the same command with :meth:`FailureRequest.from_params`.
+
+PX4 SITL with SIH, up to at least PX4 main of August 2025 (a70a558), has no handler for a GNSS
+failure: the command goes to uORB and nothing answers (``failure gps off`` in PX4's own shell times
+out the same way; only the Gazebo-classic bridge ``simulator_mavlink`` handled it, and SIH's
+``sensor_gps_sim`` learnt it later). For such a vehicle the injector can instead write PX4's
+``SIM_GPS_USED`` parameter (satellites of the simulated receiver; below 4 it reports no fix, and
+EKF2 stops fusing GNSS exactly as when a receiver loses its fix): ``gnss_via_param``. The event
+then says ``via: SIM_GPS_USED``.
 """
 
 from __future__ import annotations
@@ -25,6 +33,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from swarmbox.hal.mavlink.codec import CMD_INJECT_FAILURE
 from swarmbox.hal.mavlink.link import Command
+from swarmbox.hal.mavlink.paramset import Done
 
 __all__ = ["CMD_INJECT_FAILURE", "TYPES", "UNITS", "FailureInjector", "FailureRequest"]
 
@@ -56,6 +65,11 @@ CAUSES = {
 }
 
 Emit = Callable[[str, str, dict[str, Any]], None]
+#: set_param(name, value, done): write an autopilot parameter, ``done(ok, detail)`` when confirmed
+SetParam = Callable[[str, float, Done], None]
+SIM_GPS_USED = "SIM_GPS_USED"        # PX4 SIH GPS simulator: satellites used; < 4 -> no fix
+SIM_GPS_USED_ON = 10                 # PX4's default
+VIA_COMMAND, VIA_PARAM = "MAV_CMD_INJECT_FAILURE", SIM_GPS_USED
 
 
 @dataclass(frozen=True)
@@ -105,26 +119,41 @@ class FailureInjector:
     :meth:`on_failed`. ``active`` holds the failures the autopilot accepted and that were not ended.
     """
 
-    def __init__(self, submit: Callable[[Command], None], emit: Emit) -> None:
-        self._submit, self._emit = submit, emit
+    def __init__(self, submit: Callable[[Command], None], emit: Emit, set_param: SetParam | None = None,
+                 gnss_via_param: bool = False) -> None:
+        self._submit, self._emit, self._set_param = submit, emit, set_param
+        self.gnss_via_param = gnss_via_param and set_param is not None
         self.active: dict[tuple[str, int], str] = {}
         self.refused = 0
 
     def inject(self, request: FailureRequest) -> None:
         """Ask the autopilot for ``request`` (``kind="ok"`` ends a failure of that unit)."""
+        if request.unit == "gps" and self.gnss_via_param and self._set_param is not None:
+            if request.kind not in ("off", "ok"):
+                self._refuse(request, "unsupported", f"only off and ok through {SIM_GPS_USED}", VIA_PARAM)
+                return
+            value = 0 if request.kind == "off" else SIM_GPS_USED_ON
+            self._set_param(SIM_GPS_USED, value, lambda ok, detail: self._accepted(request, VIA_PARAM) if ok
+                            else self._refuse(request, "not confirmed", detail, VIA_PARAM))
+            return
         self._submit(Command(CMD_INJECT_FAILURE, request.params, on_accepted=lambda: self._accepted(request)))
 
     def end(self, unit: str, instance: int = 0) -> None:
         """End a failure of ``unit`` (FAILURE_TYPE_OK)."""
         self.inject(FailureRequest(unit, "ok", instance))
 
-    def _accepted(self, request: FailureRequest) -> None:
+    def _accepted(self, request: FailureRequest, via: str = VIA_COMMAND) -> None:
         key = (request.unit, request.instance)
         if request.kind == "ok":
             self.active.pop(key, None)
         else:
             self.active[key] = request.kind
-        self._emit("fault", "inject_accepted", request.event_data())
+        self._emit("fault", "inject_accepted", {**request.event_data(), "via": via})
+
+    def _refuse(self, request: FailureRequest, result: str, cause: str, via: str, tries: int = 0) -> None:
+        self.refused += 1
+        self._emit("fault", "inject_refused", {**request.event_data(), "result": result, "tries": tries,
+                                               "cause": cause, "via": via})
 
     def on_failed(self, cmd: Command, result: str) -> None:
         """The tracker gave up on an injection: a ``fault/inject_refused`` event with the cause."""
@@ -132,6 +161,4 @@ class FailureInjector:
             request = FailureRequest.from_params(cmd.params)
         except ValueError:
             return
-        self.refused += 1
-        self._emit("fault", "inject_refused", {**request.event_data(), "result": result, "tries": cmd.tries,
-                                               "cause": CAUSES.get(result, "the autopilot refused it")})
+        self._refuse(request, result, CAUSES.get(result, "the autopilot refused it"), VIA_COMMAND, cmd.tries)

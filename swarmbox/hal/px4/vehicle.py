@@ -47,6 +47,7 @@ from swarmbox.hal.mavlink.codec import (
     HeartbeatMsg,
     LandedStateMsg,
     LocalPositionMsg,
+    ParamValueMsg,
     StatusTextMsg,
     SysStatusMsg,
     flight_mode,
@@ -56,6 +57,7 @@ from swarmbox.hal.mavlink.codec import (
 from swarmbox.hal.mavlink.failure import FailureInjector, FailureRequest
 from swarmbox.hal.mavlink.frames import VehicleFrame
 from swarmbox.hal.mavlink.link import Command, CommandTracker, VehicleLink
+from swarmbox.hal.mavlink.paramset import ParamSetter
 from swarmbox.hal.px4.linkreport import LinkReport
 from swarmbox.hal.px4.params import LinkConfig
 from swarmbox.hal.safety import SafetyLimits, check_setpoint
@@ -71,7 +73,7 @@ SILENCE_AFTER = 20            # unrequested packets of one id before asking PX4 
 _NOT_CRITICAL = frozenset((CMD_SET_MESSAGE_INTERVAL, CMD_REQUEST_MESSAGE, CMD_INJECT_FAILURE))
 WANTED = frozenset(MSG[m] for m in (
     "HEARTBEAT", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "GPS_RAW_INT", "SYS_STATUS",
-    "EXTENDED_SYS_STATE", "COMMAND_ACK", "STATUSTEXT", "HIL_STATE_QUATERNION"))
+    "EXTENDED_SYS_STATE", "COMMAND_ACK", "STATUSTEXT", "HIL_STATE_QUATERNION", "PARAM_VALUE"))
 
 
 class Px4Vehicle:
@@ -86,7 +88,12 @@ class Px4Vehicle:
         self._cmds = CommandTracker(self._send_command, self._command_report, cfg.command_timeout_s,
                                     cfg.command_retries, self._command_timed_out, self._command_failed)
         self.failure = ""                          # the latest flight command the autopilot refused
-        self.failures = FailureInjector(lambda cmd: self._cmds.submit(cmd, self._now), emit)
+        self._params = ParamSetter(lambda name, value, kind: self._link.send(self._enc.param_set(
+            self._target, name, value, kind)), cfg.command_timeout_s, cfg.command_retries)
+        self.failures = FailureInjector(
+            lambda cmd: self._cmds.submit(cmd, self._now), emit,
+            lambda name, value, done: self._params.set(name, value, self._now, done),
+            gnss_via_param=cfg.gnss_failure == "sim_param")
         self._on_regain: Command | None = None      # the last command lost with the link
         self._now = 0.0
         self.connected = self.link_lost = False
@@ -112,7 +119,8 @@ class Px4Vehicle:
         self._handlers: dict[type, Callable[[Any], None]] = {
             LocalPositionMsg: self._on_local, GlobalPositionMsg: self._on_global, GnssMsg: self._on_gnss,
             SysStatusMsg: self._on_sys_status, LandedStateMsg: self._on_landed, CommandAckMsg: self._on_ack,
-            StatusTextMsg: self._on_statustext, GroundTruthMsg: self._on_truth}
+            StatusTextMsg: self._on_statustext, GroundTruthMsg: self._on_truth,
+            ParamValueMsg: self._params.on_value}
 
     @property
     def system_id(self) -> int:
@@ -208,6 +216,7 @@ class Px4Vehicle:
             self._lose_link()
         self._stream()
         self._cmds.service(now_s)
+        self._params.service(now_s)
         if now_s - self._checks_s >= 1.0:
             self._checks_s = now_s
             self._silence_unrequested()

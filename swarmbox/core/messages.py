@@ -24,6 +24,16 @@ _HEADER = 21
 _VEC3 = 12  # three float32
 
 
+#: Task codes travel as an unsigned LEB128 varint: one byte below 128 (every shipped algorithm's
+#: codes), up to five bytes for the largest code.
+TASK_CODE_MAX = 2**32 - 1
+
+
+def task_code_nbytes(code: int) -> int:
+    """Wire bytes of a task code (1 below 128, 2 below 16384, ...)."""
+    return 1 if code < 0x80 else (code.bit_length() + 6) // 7
+
+
 def make_msg_id(src: int, seq: int) -> int:
     """A run-unique message id from the sender id and the sender's message counter."""
     return ((src + 2) << 40) | seq
@@ -97,7 +107,7 @@ class TaskCommand(NamedTuple):
 
     @property
     def nbytes(self) -> int:
-        return _HEADER + 4 + 1 + 1 + _VEC3 + 4 + 2 + len(self.data) + 1 + 4
+        return _HEADER + 4 + 1 + task_code_nbytes(self.code) + _VEC3 + 4 + 2 + len(self.data) + 1 + 4
 
 
 class TaskAck(NamedTuple):

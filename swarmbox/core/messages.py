@@ -17,11 +17,19 @@ GROUND_ID = -1
 NET_ID = -2
 #: The ``subject`` of an event that is about no node in particular.
 NO_SUBJECT = -3
+#: The ``dst`` of the one ``send`` row logged for a Heartbeat published to its subscribers; the row's
+#: ``reason`` lists the destinations (see :func:`broadcast_dsts`).
+BROADCAST = -4
 
 # Encoded sizes (bytes) of a compact binary encoding: header = msg_id u64, t_sent f64, src i16,
 # dst i16, type u8.
 _HEADER = 21
 _VEC3 = 12  # three float32
+
+
+def broadcast_dsts(dsts: tuple[int, ...] | list[int]) -> str:
+    """The ``reason`` text of a broadcast ``send`` row: its destination ids, comma-separated."""
+    return ",".join(map(str, dsts))
 
 
 def make_msg_id(src: int, seq: int) -> int:

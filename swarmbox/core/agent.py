@@ -21,7 +21,7 @@ from swarmbox.api import (
     Telemetry,
 )
 from swarmbox.core.delivery import Window
-from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck, TaskCommand
+from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck, TaskCommand, make_msg_id
 from swarmbox.core.node import STAGE_OF, Node, call_hook
 from swarmbox.core.stages import TERMINAL, Stage, path_to
 
@@ -56,6 +56,9 @@ class AgentNode(Node):
         self._window = Window(t.task_retry_ticks * (t.task_max_retries + 2))
         self._gnss_seq = -1
         self._exec_done = False
+        self._window_busy = False   # a stage change may release held tasks: drain even without mail
+        self._state_every = t.state_every_ticks
+        self._msg_id_base = make_msg_id(node_id, 0)
         self._log_state = kw["log"].appender("state")
         self._log_setpoint = kw["log"].appender("setpoints")
         self.net.subscribe(node_id, superior)
@@ -68,14 +71,17 @@ class AgentNode(Node):
         if not tel.link_ok and self.stage not in TERMINAL:
             self.event("failsafe", "vehicle_link_lost", self.node_id, action="return_to_launch")
             self.enter(Stage.ABORT, "link to the autopilot lost", failsafe=True)
-        self._drain_inbox()
-        if self.stage not in TERMINAL:
+        if self.inbox or self._window_busy or self.proximity:
+            self._drain_inbox()
+        if self._heard_superior and self.stage not in TERMINAL:
             self._watch_superior()
-        self.age_inferiors()
+        if self.inferiors:
+            self.age_inferiors()
         self.complete = self._stage_work(tel)
         self._publish(tel)
-        self.retry_tasks()
-        if self.time.tick % self.timing.state_every_ticks == 0:
+        if self.outbox.pending:
+            self.retry_tasks()
+        if self.time.tick % self._state_every == 0:
             self._record_state(tel)
         if self.stage in TERMINAL and (not tel.armed or self.stage_timed_out()):
             self.finished = True
@@ -109,8 +115,10 @@ class AgentNode(Node):
             elif kind is ProxAlert:
                 self._on_prox_alert(msg)
         inbox.clear()
-        for src in self._window.holding():   # a stage change may have released held tasks
-            self._deliver_ready(src)
+        if self._window_busy:
+            for src in self._window.holding():   # a stage change may have released held tasks
+                self._deliver_ready(src)
+            self._window_busy = bool(self._window.holding())
         if self.proximity and self.time.tick - self._prox_tick > self.timing.lost_inferior_ticks:
             self.proximity = ()   # the ground's all-clear was lost, or the ground fell silent
 
@@ -129,6 +137,7 @@ class AgentNode(Node):
                       cmd.src)
         if self._window.accept(cmd, self.time.tick):
             self._deliver_ready(cmd.src)
+            self._window_busy = True
 
     def _deliver_ready(self, src: int) -> None:
         for cmd in self._window.release(src, int(self.stage), self.time.tick):
@@ -236,20 +245,27 @@ class AgentNode(Node):
     # -- outgoing -------------------------------------------------------------------------------
     def _publish(self, tel: Telemetry) -> None:
         node_id, net = self.node_id, self.net
+        now = self.clock.now()
         if net.has_subscribers(node_id):
             succ = tuple(call_hook(self, "successors", self.algorithm.successors, self.ctx))
-            net.publish(Heartbeat(self.next_msg_id(), self.clock.now(), node_id, int(self.stage), succ,
+            net.publish(Heartbeat(self.next_msg_id(), now, node_id, int(self.stage), succ,
                                   tel.pos_ned_m, tel.vel_ned_m_s))
-        total, alive = self.head_count()
         disc = None
         if tel.gnss_seq != self._gnss_seq and tel.gnss_ned_m is not None:
             self._gnss_seq = tel.gnss_seq
             g, p = tel.gnss_ned_m, tel.pos_ned_m
             disc = (g[0] - p[0], g[1] - p[1], g[2] - p[2])
-        complete = self.complete and self.inferiors_complete()
-        net.send(Report(self.next_msg_id(), self.clock.now(), node_id, self.superior, int(self.stage),
-                        complete, total + 1, alive + (self.stage is not Stage.ABORT), tel.pos_ned_m,
-                        tel.vel_ned_m_s, disc, self.report_data, self.descendants()), self.superior)
+        stage = self.stage
+        if self.inferiors:
+            total, alive = self.head_count()
+            complete, below = self.complete and self.inferiors_complete(), self.descendants()
+        else:   # a leaf (most drones): nothing below it
+            total = alive = 0
+            complete, below = self.complete, ()
+        self._seq += 1
+        net.send(Report(self._msg_id_base | self._seq, now, node_id, self.superior, int(stage), complete,
+                        total + 1, alive + (stage is not Stage.ABORT), tel.pos_ned_m, tel.vel_ned_m_s, disc,
+                        self.report_data, below), self.superior)
 
     def _record_state(self, tel: Telemetry) -> None:
         p, v = tel.pos_ned_m, tel.vel_ned_m_s

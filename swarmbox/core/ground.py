@@ -44,6 +44,8 @@ class GroundNode(Node):
         self.proximity = ProximityTracker(self.timing.proximity_m, self.timing.proximity_window_s)
         self.prox_pairs: dict[tuple[int, int], float] = {}   # alerted pair -> distance, this tick
         self.observer: GroundObserver | None = None
+        # the base class's on_report does nothing: not calling it saves a call per Report
+        self._wants_reports = type(algorithm).on_report is not GroundAlgorithm.on_report
         if self.mission.swarm_size > DIRECT_PAIRS_UP_TO:
             kd_tree()   # load scipy now, not inside the first timed tick
 
@@ -72,7 +74,7 @@ class GroundNode(Node):
         for msg in inbox:
             kind = type(msg)
             if kind is Report:
-                if self.on_report(msg):
+                if self.on_report(msg) and self._wants_reports:
                     call_hook(self, "on_report", self.algorithm.on_report, self.ctx,
                               self._alive[msg.src])
             elif kind is TaskAck:

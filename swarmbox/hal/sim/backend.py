@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
@@ -33,20 +33,6 @@ def _check_homes(homes_ned_m: Sequence[Sequence[float]]) -> np.ndarray:
     if homes.ndim != 2 or homes.shape[1] != 3 or not len(homes) or not np.all(np.isfinite(homes)):
         raise ValueError(f"homes_ned_m must be a non-empty list of finite (n, e, d), got {homes_ned_m!r}")
     return homes
-
-
-class _TelemetryLists(NamedTuple):
-    """The fleet's numeric state as Python lists, built once per step on first demand."""
-
-    pos: list[list[float]]
-    vel: list[list[float]]
-    true_pos: list[list[float]]
-    fix: list[list[float]]
-    seq: list[int]
-    yaw: list[float]
-    landed: list[bool]
-    battery: list[float]
-    ready: list[bool]
 
 
 class SimBackend:
@@ -97,7 +83,7 @@ class SimBackend:
         self._world.read(self._pos, self._vel)
         self._dt_s, self._substeps, self._t0_s, self._k = -1.0, 1, 0.0, 0
         self._vert_k = (np.zeros(()), np.zeros(()))
-        self._tel: _TelemetryLists | None = None
+        self._tel: list[Telemetry] | None = None   # every vehicle's, built once per step on demand
         self._supervised: set[int] = set()
         self._closed = False
         self.vehicles = [SimVehicle(self, i, (h[0], h[1], h[2]), ctrl=self.ctrl, params=p, limits=limits)
@@ -280,19 +266,24 @@ class SimBackend:
         return math.sqrt(n * n + e * e + d * d)
 
     def telemetry_of(self, i: int) -> Telemetry:
-        """Vehicle ``i``'s telemetry (its lists are built once per step, on first demand)."""
-        c = self._tel if self._tel is not None else self._build_lists()
+        """Vehicle ``i``'s telemetry. The whole fleet's is built once per step, on first demand; a
+        vehicle's armed flag and mode are its own and may change within the step (then re-read)."""
+        tel = (self._tel or self._build_telemetry())[i]
         v = self.vehicles[i]
-        fix = c.fix[i]
-        return Telemetry(self.t_s, tuple(c.pos[i]), tuple(c.vel[i]), c.yaw[i],  # type: ignore[arg-type]
-                         tuple(fix) if c.seq[i] else None, c.seq[i], v.armed, c.landed[i], v.mode,
-                         c.battery[i], c.ready[i], tuple(c.true_pos[i]))  # type: ignore[arg-type]
+        if tel.armed is not v.armed or tel.mode is not v.mode:
+            tel = self._tel[i] = tel._replace(armed=v.armed, mode=v.mode)   # type: ignore[index]
+        return tel
 
-    def _build_lists(self) -> _TelemetryLists:
+    def _build_telemetry(self) -> list[Telemetry]:
+        """Every vehicle's telemetry from the fleet arrays in one pass (tuples made by ``zip`` in C)."""
         g = self._gnss
         battery = np.clip(1.0 - self._air_s / self.params.battery_endurance_s, 0.0, 1.0)
-        self._tel = _TelemetryLists(
-            self._est.T.tolist(), self._vel.T.tolist(), self._pos.T.tolist(), g.fix_ned_m.T.tolist(),
-            g.seq.tolist(), self.ctrl.yaw_rad.tolist(), (self.airborne == 0.0).tolist(),
-            battery.tolist(), (g.ready(self.t_s) & ~self._crashed).tolist())
+        seq = g.seq.tolist()
+        fixes = [f if s else None for f, s in zip(zip(*g.fix_ned_m.tolist()), seq, strict=True)]
+        t, vehicles = self.t_s, self.vehicles
+        self._tel = [Telemetry(t, p, v, yaw, fix, s, veh.armed, landed, veh.mode, batt, ready, tp)
+                     for p, v, yaw, fix, s, veh, landed, batt, ready, tp in zip(
+                         zip(*self._est.tolist()), zip(*self._vel.tolist()), self.ctrl.yaw_rad.tolist(),
+                         fixes, seq, vehicles, (self.airborne == 0.0).tolist(), battery.tolist(),
+                         (g.ready(t) & ~self._crashed).tolist(), zip(*self._pos.tolist()), strict=False)]
         return self._tel

@@ -13,6 +13,7 @@ from swarmbox.api import (
     DroneAlgorithm,
     DroneContext,
     DroneState,
+    FlightMode,
     PeerState,
     Setpoint,
     SetpointKind,
@@ -22,12 +23,14 @@ from swarmbox.api import (
 )
 from swarmbox.core.delivery import Window
 from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck, TaskCommand, make_msg_id
-from swarmbox.core.node import STAGE_OF, Node, call_hook
+from swarmbox.core.node import STAGE_OF, Node, call_hook, hook_error
 from swarmbox.core.stages import TERMINAL, Stage, path_to
 
 _KIND_NAMES = {SetpointKind.POSITION: "position", SetpointKind.VELOCITY: "velocity",
                SetpointKind.ACCELERATION: "acceleration"}
 _LOOP_HOOK = {Stage.PREPARATION: "prep_loop/prep_complete", Stage.EXECUTION: "exec_loop/exec_complete"}
+#: Mode text by mode (``FlightMode.value`` is a Python-level property; a dict lookup is not).
+_MODE_TEXT = {m: m.value for m in FlightMode}
 _NAN = float("nan")
 _NAN3 = (_NAN, _NAN, _NAN)
 _OK = SetpointVerdict("ok")
@@ -188,9 +191,20 @@ class AgentNode(Node):
             if (stage is Stage.EXECUTION and not tel.armed
                     and self.stage_tick % self.timing.arm_retry_ticks == 0):
                 self.vehicle.arm()
-            complete, sp = call_hook(self, _LOOP_HOOK[stage], self.algorithm.run_stage, stage, self.ctx)
+            try:   # call_hook, inlined: this runs once per drone and tick
+                result = self.algorithm.run_stage(stage, self.ctx)
+            except Exception as exc:  # the user's code may raise anything
+                raise hook_error(self, _LOOP_HOOK[stage], exc) from exc
+            complete, sp = result
             if sp is not None:
-                self._fly(sp)
+                if type(sp) is not Setpoint:
+                    raise TypeError(f"drone {self.node_id}: exec_loop returned {type(sp).__name__}, "
+                                    "expected Setpoint or None")
+                verdict = self.vehicle.setpoint(sp) or _OK
+                n, e, d = sp.ned
+                yaw = sp.yaw_rad
+                self._log_setpoint((self.clock.now(), self.time.tick, _KIND_NAMES[sp.kind], n, e, d,
+                                    _NAN if yaw is None else yaw, verdict.action, verdict.reason))
             if stage is Stage.EXECUTION and complete != self._exec_done:
                 self._exec_done = complete
                 self.event("progress", "exec_complete" if complete else "exec_incomplete", self.node_id)
@@ -199,15 +213,6 @@ class AgentNode(Node):
             return tel.landed and not tel.armed  # touched down and disarmed by the autopilot
 
         return True  # ICEBREAK, TERMINATION
-
-    def _fly(self, sp: Setpoint) -> None:
-        if type(sp) is not Setpoint:
-            raise TypeError(f"drone {self.node_id}: exec_loop returned {type(sp).__name__}, "
-                            "expected Setpoint or None")
-        verdict = self.vehicle.setpoint(sp) or _OK
-        n, e, d = sp.ned
-        self._log_setpoint((self.clock.now(), self.time.tick, _KIND_NAMES[sp.kind], n, e, d,
-                            _NAN if sp.yaw_rad is None else sp.yaw_rad, verdict.action, verdict.reason))
 
     # -- superior watchdog ----------------------------------------------------------------------
     def _watch_superior(self) -> None:
@@ -272,5 +277,5 @@ class AgentNode(Node):
         g = tel.gnss_ned_m or _NAN3
         tp = tel.true_pos_ned_m or _NAN3
         self._log_state((self.clock.now(), self.time.tick, int(self.stage), tel.armed, tel.landed,
-                         tel.mode.value, p[0], p[1], p[2], v[0], v[1], v[2], g[0], g[1], g[2],
+                         _MODE_TEXT[tel.mode], p[0], p[1], p[2], v[0], v[1], v[2], g[0], g[1], g[2],
                          tp[0], tp[1], tp[2], tel.yaw_rad, tel.battery_frac))

@@ -214,8 +214,13 @@ def call_hook(node: Node, hook: str, fn: Callable, *args: Any) -> Any:
     try:
         return fn(*args)
     except Exception as exc:  # the user's code may raise anything
-        who = "ground" if node.node_id < 0 else f"drone {node.node_id}"
-        raise AlgorithmError(f"{who}: {hook} raised {type(exc).__name__}: {exc}") from exc
+        raise hook_error(node, hook, exc) from exc
+
+
+def hook_error(node: Node, hook: str, exc: Exception) -> AlgorithmError:
+    """The AlgorithmError for ``exc`` raised by ``hook`` (for hot paths that inline :func:`call_hook`)."""
+    who = "ground" if node.node_id < 0 else f"drone {node.node_id}"
+    return AlgorithmError(f"{who}: {hook} raised {type(exc).__name__}: {exc}")
 
 
 def _jsonable(x: Any) -> Any:

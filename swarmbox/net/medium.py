@@ -157,6 +157,11 @@ class SimMedium:
         t, tick = self._time.t_s, self._time.tick
         mtype, nbytes = MESSAGE_TYPES[type(msg)], msg.nbytes
         sender.log((sender.clock.now(), tick, "send", msg.msg_id, mtype, src, dst, nbytes, msg.t_sent_s, ""))
+        if self._ideal and not self._links and not self.hooks:
+            receiver = self._nodes.get(dst)
+            if receiver is not None and receiver.connected:   # ideal and reachable: no draw, FIFO
+                self._fifo.append((t + self._default.latency_s, tick, 0, dst, msg, mtype, nbytes))
+                return
         self._route(msg, src, dst, t, tick, mtype, nbytes)
 
     def _route(self, msg, src: int, dst: int, t: float, tick: int, mtype: str, nbytes: int) -> None:
@@ -181,9 +186,18 @@ class SimMedium:
     def deliver_due(self) -> None:
         """Hand every message that has arrived by now (and was sent in an earlier tick) over."""
         t, tick = self._time.t_s + 1e-12, self._time.tick
-        fifo, q = self._fifo, self._queue
+        fifo, q, nodes = self._fifo, self._queue, self._nodes
         while fifo and fifo[0][0] <= t and fifo[0][1] < tick:
-            self._hand_over(fifo.popleft(), tick)
+            item = fifo.popleft()
+            dst = item[3]
+            ep = nodes[dst] if type(dst) is int else None
+            if ep is not None and ep.connected:   # the common case, inline: one receiver, reachable
+                arrival, _, _, _, msg, mtype, nbytes = item
+                ep.log((ep.clock.at(arrival), tick, "recv", msg.msg_id, mtype, msg.src, dst, nbytes,
+                        msg.t_sent_s, ""))
+                ep.inbox.append(msg)
+            else:
+                self._hand_over(item, tick)
         while q and q[0][0] <= t and q[0][1] < tick:
             self._hand_over(heapq.heappop(q), tick)
 

@@ -61,6 +61,7 @@ class AgentNode(Node):
         self._exec_done = False
         self._window_busy = False   # a stage change may release held tasks: drain even without mail
         self._state_every = t.state_every_ticks
+        self.own_state_rows = True   # False: a fleet-wide log writes this drone's state rows
         self._msg_id_base = make_msg_id(node_id, 0)
         self._log_state = kw["log"].appender("state")
         self._log_setpoint = kw["log"].appender("setpoints")
@@ -84,7 +85,7 @@ class AgentNode(Node):
         self._publish(tel)
         if self.outbox.pending:
             self.retry_tasks()
-        if self.time.tick % self._state_every == 0:
+        if self.own_state_rows and self.time.tick % self._state_every == 0:
             self._record_state(tel)
         if self.stage in TERMINAL and (not tel.armed or self.stage_timed_out()):
             self.finished = True

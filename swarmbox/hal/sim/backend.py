@@ -287,3 +287,23 @@ class SimBackend:
                          fixes, seq, vehicles, (self.airborne == 0.0).tolist(), battery.tolist(),
                          (g.ready(t) & ~self._crashed).tolist(), zip(*self._pos.tolist()), strict=False)]
         return self._tel
+
+    # ---- fleet state export (the recorder's columnar state rows) --------------------------------
+    def state_columns(self, index: np.ndarray) -> list[np.ndarray]:
+        """The numeric columns of the ``state`` log rows of vehicles ``index``, as telemetry reports
+        them now: estimated position and velocity, latest GNSS fix (NaN before the first), true
+        position (each n, e, d), yaw, battery fraction, landed. A crashed vehicle's are frozen."""
+        g = self._gnss
+        battery = np.clip(1.0 - self._air_s / self.params.battery_endurance_s, 0.0, 1.0)
+        cols = [*self._est[:, index], *self._vel[:, index], *g.fix_ned_m[:, index], *self._pos[:, index],
+                self.ctrl.yaw_rad[index], battery[index], self.airborne[index] == 0.0]
+        if self._n_crashed:
+            for j in np.flatnonzero(self._crash_seen[index]).tolist():
+                tel = self.vehicles[int(index[j])].frozen
+                if tel is not None:
+                    fix = tel.gnss_ned_m or (math.nan,) * 3
+                    values = (*tel.pos_ned_m, *tel.vel_ned_m_s, *fix, *tel.true_pos_ned_m, tel.yaw_rad,
+                              tel.battery_frac, tel.landed)
+                    for col, value in zip(cols, values, strict=True):
+                        col[j] = value
+        return cols

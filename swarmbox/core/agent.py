@@ -8,6 +8,8 @@ vehicle) -> Heartbeat and Report out -> task retries -> state row.
 
 from __future__ import annotations
 
+from functools import partial
+
 from swarmbox.api import (
     DescendantState,
     DroneAlgorithm,
@@ -32,6 +34,7 @@ _LOOP_HOOK = {Stage.PREPARATION: "prep_loop/prep_complete", Stage.EXECUTION: "ex
 #: Mode text by mode (``FlightMode.value`` is a Python-level property; a dict lookup is not).
 _MODE_TEXT = {m: m.value for m in FlightMode}
 _NAN = float("nan")
+_new_state = partial(tuple.__new__, DroneState)
 _NAN3 = (_NAN, _NAN, _NAN)
 _OK = SetpointVerdict("ok")
 
@@ -93,7 +96,8 @@ class AgentNode(Node):
     def own_state(self) -> DroneState:
         """This tick's telemetry without ground truth (built once, on first use)."""
         if self._own is None:
-            self._own = DroneState.of(self.telemetry)
+            tel = self.telemetry   # DroneState.of(tel), without the Python-level NamedTuple constructor
+            self._own = _new_state((*tel[:11], tel.link_ok))
         return self._own
 
     def _drain_inbox(self) -> None:

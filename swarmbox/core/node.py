@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from functools import partial
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -22,6 +23,8 @@ Row = tuple
 _ABORT = int(Stage.ABORT)
 #: Stage by code, for building views without an enum call per message.
 STAGE_OF = {int(s): s for s in Stage}
+#: InferiorReport(*fields) without the Python-level NamedTuple constructor (one per Report received).
+_new_inferior_report = partial(tuple.__new__, InferiorReport)
 
 
 class Transport(Protocol):
@@ -118,21 +121,22 @@ class Node:
     # -- inferiors ------------------------------------------------------------------------------
     def on_report(self, rep: Report) -> bool:
         """Store a Report; returns False (and logs) when the sender is not a known drone."""
-        if rep.src not in self.mission.initial_positions:
-            self.event("error", "unknown_drone", rep.src, reason="report from a drone not in the mission")
-            return False
-        inf = self.inferiors.get(rep.src)
+        src = rep.src
+        inf = self.inferiors.get(src)
         if inf is None:
-            self.inferiors[rep.src] = _Inferior(rep)
-            self.event("topology", "inferior_joined", rep.src)
-        else:
+            if src not in self.mission.initial_positions:
+                self.event("error", "unknown_drone", src, reason="report from a drone not in the mission")
+                return False
+            self.inferiors[src] = _Inferior(rep)
+            self.event("topology", "inferior_joined", src)
+        else:   # known, hence in the mission
             if not inf.alive:
                 inf.alive = True
-                self.event("topology", "inferior_rejoined", rep.src)
+                self.event("topology", "inferior_rejoined", src)
             inf.report, inf.silent_ticks = rep, 0
             inf.received += 1
-        self._alive[rep.src] = InferiorReport(rep.src, STAGE_OF[rep.stage], rep.complete, rep.pos_ned_m,
-                                              rep.vel_ned_m_s, rep.data, self.clock.now())
+        self._alive[src] = _new_inferior_report((src, STAGE_OF[rep.stage], rep.complete, rep.pos_ned_m,
+                                                 rep.vel_ned_m_s, rep.data, self.clock.now()))
         return True
 
     def age_inferiors(self) -> None:

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from functools import partial
+from itertools import repeat
 from typing import Any
 
 import numpy as np
@@ -26,6 +28,8 @@ from swarmbox.hal.sim.world import PlaneWorld, ned_xy
 from swarmbox.hal.vehicle import VehicleEvent
 
 __all__ = ["SimBackend", "SimParams", "SimVehicle"]
+
+_new_telemetry = partial(tuple.__new__, Telemetry)   # Telemetry(*fields), all 13 given
 
 
 def _check_homes(homes_ned_m: Sequence[Sequence[float]]) -> np.ndarray:
@@ -275,17 +279,21 @@ class SimBackend:
         return tel
 
     def _build_telemetry(self) -> list[Telemetry]:
-        """Every vehicle's telemetry from the fleet arrays in one pass (tuples made by ``zip`` in C)."""
+        """Every vehicle's telemetry from the fleet arrays in one pass: the vectors are made by
+        ``zip`` and the records by ``tuple.__new__``, both in C (a NamedTuple's own constructor
+        is Python code)."""
         g = self._gnss
         battery = np.clip(1.0 - self._air_s / self.params.battery_endurance_s, 0.0, 1.0)
         seq = g.seq.tolist()
-        fixes = [f if s else None for f, s in zip(zip(*g.fix_ned_m.tolist()), seq, strict=True)]
-        t, vehicles = self.t_s, self.vehicles
-        self._tel = [Telemetry(t, p, v, yaw, fix, s, veh.armed, landed, veh.mode, batt, ready, tp)
-                     for p, v, yaw, fix, s, veh, landed, batt, ready, tp in zip(
-                         zip(*self._est.tolist()), zip(*self._vel.tolist()), self.ctrl.yaw_rad.tolist(),
-                         fixes, seq, vehicles, (self.airborne == 0.0).tolist(), battery.tolist(),
-                         (g.ready(t) & ~self._crashed).tolist(), zip(*self._pos.tolist()), strict=False)]
+        fixes = zip(*g.fix_ned_m.tolist())
+        if not all(seq):
+            fixes = [f if s else None for f, s in zip(fixes, seq, strict=True)]
+        t, vehicles, n = self.t_s, self.vehicles, self.n
+        self._tel = list(map(_new_telemetry, zip(
+            repeat(t, n), zip(*self._est.tolist()), zip(*self._vel.tolist()), self.ctrl.yaw_rad.tolist(),
+            fixes, seq, [v.armed for v in vehicles], (self.airborne == 0.0).tolist(),
+            [v.mode for v in vehicles], battery.tolist(), (g.ready(t) & ~self._crashed).tolist(),
+            zip(*self._pos.tolist()), repeat(True, n))))
         return self._tel
 
     # ---- fleet state export (the recorder's columnar state rows) --------------------------------

@@ -35,6 +35,7 @@ _LOOP_HOOK = {Stage.PREPARATION: "prep_loop/prep_complete", Stage.EXECUTION: "ex
 _MODE_TEXT = {m: m.value for m in FlightMode}
 _NAN = float("nan")
 _new_state = partial(tuple.__new__, DroneState)
+_new_report = partial(tuple.__new__, Report)   # Report(*all 13 fields), built in C
 _NAN3 = (_NAN, _NAN, _NAN)
 _OK = SetpointVerdict("ok")
 
@@ -273,9 +274,10 @@ class AgentNode(Node):
             total = alive = 0
             complete, below = self.complete, ()
         self._seq += 1
-        net.send(Report(self._msg_id_base | self._seq, now, node_id, self.superior, int(stage), complete,
-                        total + 1, alive + (stage is not Stage.ABORT), tel.pos_ned_m, tel.vel_ned_m_s, disc,
-                        self.report_data, below), self.superior)
+        superior = self.superior
+        net.send(_new_report((self._msg_id_base | self._seq, now, node_id, superior, int(stage), complete,
+                              total + 1, alive + (stage is not Stage.ABORT), tel.pos_ned_m, tel.vel_ned_m_s,
+                              disc, self.report_data, below)), superior)
 
     def _record_state(self, tel: Telemetry) -> None:
         p, v = tel.pos_ned_m, tel.vel_ned_m_s

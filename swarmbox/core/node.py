@@ -25,6 +25,7 @@ _ABORT = int(Stage.ABORT)
 STAGE_OF = {int(s): s for s in Stage}
 #: InferiorReport(*fields) without the Python-level NamedTuple constructor (one per Report received).
 _new_inferior_report = partial(tuple.__new__, InferiorReport)
+_new_descendant = partial(tuple.__new__, DescendantState)
 
 
 class Transport(Protocol):
@@ -176,11 +177,13 @@ class Node:
 
     def descendants(self) -> tuple[DescendantState, ...]:
         out = []
+        append, extend = out.append, out.extend
         for drone_id, inf in self.inferiors.items():
             if inf.alive:
                 rep = inf.report
-                out.append(DescendantState(drone_id, rep.stage, rep.pos_ned_m))
-                out.extend(rep.descendants)
+                append(_new_descendant((drone_id, rep.stage, rep.pos_ned_m)))
+                if rep.descendants:
+                    extend(rep.descendants)
         return tuple(out)
 
     # -- tasks ----------------------------------------------------------------------------------

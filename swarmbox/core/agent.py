@@ -36,6 +36,7 @@ _MODE_TEXT = {m: m.value for m in FlightMode}
 _NAN = float("nan")
 _new_state = partial(tuple.__new__, DroneState)
 _new_report = partial(tuple.__new__, Report)   # Report(*all 13 fields), built in C
+_new_peer = partial(tuple.__new__, PeerState)
 _NAN3 = (_NAN, _NAN, _NAN)
 _OK = SetpointVerdict("ok")
 
@@ -103,16 +104,21 @@ class AgentNode(Node):
 
     def _drain_inbox(self) -> None:
         inbox = self.inbox
+        now = None
         for msg in inbox:
             kind = type(msg)
             if kind is Heartbeat:
                 if msg.src == self.superior:
                     self._sup_silent, self._heard_superior = 0, True
                     self._successor_list = msg.successors
-                    self._follow(STAGE_OF[msg.stage])
+                    commanded = STAGE_OF[msg.stage]
+                    if commanded is not self.stage:
+                        self._follow(commanded)
                 else:
-                    self.peer_view[msg.src] = PeerState(msg.src, STAGE_OF[msg.stage], msg.pos_ned_m,
-                                                        msg.vel_ned_m_s, self.clock.now())
+                    if now is None:
+                        now = self.clock.now()
+                    self.peer_view[msg.src] = _new_peer((msg.src, STAGE_OF[msg.stage], msg.pos_ned_m,
+                                                         msg.vel_ned_m_s, now))
             elif kind is Report:
                 if self.on_report(msg):
                     call_hook(self, "on_report", self.algorithm.on_report, self.ctx,

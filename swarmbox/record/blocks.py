@@ -46,12 +46,8 @@ class StateBlocks:
                 parts.append((np.full(len(rows), log.node_id, dtype=np.int16), cols))
                 rows.clear()
         nodes = np.concatenate([p[0] for p in parts]).astype(np.int16)
-        columns = []
-        for i in range(len(_STATE)):
-            if i in _STRINGS:
-                columns.append(np.array([v for p in parts for v in p[1][i]], dtype=object))
-            else:
-                columns.append(np.concatenate([np.asarray(p[1][i]) for p in parts]))
+        columns = [np.concatenate([np.asarray(p[1][i], dtype=object if i in _STRINGS else None)
+                                   for p in parts]) for i in range(len(_STATE))]
         order = np.lexsort((columns[_TICK], nodes))   # by node, then tick (blocks arrive in tick order)
         nodes = nodes[order]
         arrays = [column(c[order], f.type) for c, f in zip(columns, _STATE, strict=True)]

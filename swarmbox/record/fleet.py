@@ -11,19 +11,23 @@ telemetry) is gathered per agent. The rows' values and meaning are the same as a
 from __future__ import annotations
 
 from collections.abc import Sequence
+from operator import attrgetter
 from typing import Any, Protocol
 
 import numpy as np
 
 from swarmbox.api import FlightMode
+from swarmbox.core.clock import readings
 
 _MODE_TEXT = {m: m.value for m in FlightMode}
+_TELEMETRY, _STAGE = attrgetter("telemetry"), attrgetter("stage")
+_ARMED, _MODE = attrgetter("armed"), attrgetter("mode")
 
 
 class FleetArrays(Protocol):
     """A backend that can export its fleet state (:meth:`SimBackend.state_columns`)."""
 
-    def state_columns(self, index: np.ndarray) -> list[np.ndarray]: ...
+    def state_columns(self, index: np.ndarray | None = None) -> list[np.ndarray]: ...
 
 
 class StateSink(Protocol):
@@ -44,7 +48,11 @@ class FleetStateLog:
         """Take note of removed agents (the tick loop calls this when it removes one)."""
         self._live = [a for a in self.agents if not a.removed]
         self._nodes = np.array([a.node_id for a in self._live], dtype=np.int16)
-        self._index = np.array([a.vehicle.drone_id for a in self._live], dtype=np.int64)
+        index = np.array([a.vehicle.drone_id for a in self._live], dtype=np.int64)
+        # the whole fleet in vehicle order (the usual case): no fancy indexing
+        self._index = None if np.array_equal(index, np.arange(len(self.agents))) else index
+        self._clocks = [a.clock for a in self._live]
+        self._time = self._live[0].time if self._live else None
 
     def __call__(self, tick: int) -> None:
         if tick % self.every:
@@ -53,11 +61,12 @@ class FleetStateLog:
         n = len(live)
         if not n:
             return
-        tels = [a.telemetry for a in live]
-        t_s = np.fromiter([a.clock.now() for a in live], dtype=np.float64, count=n)
-        stage = np.fromiter([a.stage for a in live], dtype=np.int8, count=n)
-        armed = np.fromiter([tel.armed for tel in tels], dtype=bool, count=n)
-        mode = [_MODE_TEXT[tel.mode] for tel in tels]
+        # attribute reads through map/attrgetter: the loops run in C
+        tels = list(map(_TELEMETRY, live))
+        t_s = readings(self._clocks, self._time.t_s)
+        stage = np.fromiter(map(int, map(_STAGE, live)), dtype=np.int8, count=n)
+        armed = np.fromiter(map(_ARMED, tels), dtype=bool, count=n)
+        mode = np.array(list(map(_MODE_TEXT.__getitem__, map(_MODE, tels))), dtype=object)
         nums = self.backend.state_columns(self._index)
         landed = nums.pop()
         self.sink.state_block(self._nodes, [t_s, np.full(n, tick, dtype=np.int64), stage, armed, landed,

@@ -297,17 +297,23 @@ class SimBackend:
         return self._tel
 
     # ---- fleet state export (the recorder's columnar state rows) --------------------------------
-    def state_columns(self, index: np.ndarray) -> list[np.ndarray]:
-        """The numeric columns of the ``state`` log rows of vehicles ``index``, as telemetry reports
-        them now: estimated position and velocity, latest GNSS fix (NaN before the first), true
-        position (each n, e, d), yaw, battery fraction, landed. A crashed vehicle's are frozen."""
+    def state_columns(self, index: np.ndarray | None = None) -> list[np.ndarray]:
+        """The numeric columns of the ``state`` log rows of vehicles ``index`` (None: all, in order),
+        as telemetry reports them now: estimated position and velocity, latest GNSS fix (NaN before
+        the first), true position (each n, e, d), yaw, battery fraction, landed. Copies, made in a
+        few numpy calls; a crashed vehicle's values are its frozen telemetry's."""
         g = self._gnss
+        vectors = np.concatenate((self._est, self._vel, g.fix_ned_m, self._pos))   # (12, N), a copy
         battery = np.clip(1.0 - self._air_s / self.params.battery_endurance_s, 0.0, 1.0)
-        cols = [*self._est[:, index], *self._vel[:, index], *g.fix_ned_m[:, index], *self._pos[:, index],
-                self.ctrl.yaw_rad[index], battery[index], self.airborne[index] == 0.0]
+        landed = self.airborne == 0.0
+        yaw = self.ctrl.yaw_rad.copy()
+        if index is not None:
+            vectors, yaw, battery, landed = vectors[:, index], yaw[index], battery[index], landed[index]
+        cols = [*vectors, yaw, battery, landed]
         if self._n_crashed:
-            for j in np.flatnonzero(self._crash_seen[index]).tolist():
-                tel = self.vehicles[int(index[j])].frozen
+            crashed = self._crash_seen if index is None else self._crash_seen[index]
+            for j in np.flatnonzero(crashed).tolist():
+                tel = self.vehicles[j if index is None else int(index[j])].frozen
                 if tel is not None:
                     fix = tel.gnss_ned_m or (math.nan,) * 3
                     values = (*tel.pos_ned_m, *tel.vel_ned_m_s, *fix, *tel.true_pos_ned_m, tel.yaw_rad,

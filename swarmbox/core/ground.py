@@ -71,10 +71,11 @@ class GroundNode(Node):
 
     def _drain_inbox(self) -> None:
         inbox = self.inbox
+        now = self.clock.now()   # one reading for the whole inbox: the clock stands still within a tick
         for msg in inbox:
             kind = type(msg)
             if kind is Report:
-                if self.on_report(msg) and self._wants_reports:
+                if self.on_report(msg, now) and self._wants_reports:
                     call_hook(self, "on_report", self.algorithm.on_report, self.ctx,
                               self._alive[msg.src])
             elif kind is TaskAck:

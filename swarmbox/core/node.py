@@ -120,8 +120,11 @@ class Node:
         return self.stage_tick * self.tick_s > self.timing.timeouts_s[self.stage.name]
 
     # -- inferiors ------------------------------------------------------------------------------
-    def on_report(self, rep: Report) -> bool:
-        """Store a Report; returns False (and logs) when the sender is not a known drone."""
+    def on_report(self, rep: Report, now: float | None = None) -> bool:
+        """Store a Report; returns False (and logs) when the sender is not a known drone.
+
+        ``now``: this node's clock reading, when the caller already has it (one per inbox drain).
+        """
         src = rep.src
         inf = self.inferiors.get(src)
         if inf is None:
@@ -137,7 +140,8 @@ class Node:
             inf.report, inf.silent_ticks = rep, 0
             inf.received += 1
         self._alive[src] = _new_inferior_report((src, STAGE_OF[rep.stage], rep.complete, rep.pos_ned_m,
-                                                 rep.vel_ned_m_s, rep.data, self.clock.now()))
+                                                 rep.vel_ned_m_s, rep.data,
+                                                 self.clock.now() if now is None else now))
         return True
 
     def age_inferiors(self) -> None:

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import json
 import math
-from functools import partial
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from functools import partial
 from types import MappingProxyType
 from typing import Any, Protocol
 

@@ -2,8 +2,9 @@
 
 Every message is recorded where it happens: a ``send`` row in the sender's log (one per
 destination; a published Heartbeat gets one row for all its subscribers, ``dst`` =
-:data:`~swarmbox.core.messages.BROADCAST` and the destinations listed in ``reason``), a ``recv`` row in the receiver's log stamped with the receiver's clock at the
-*arrival* instant (so latency below one tick is measurable), and a ``drop`` row in the ``net`` log.
+:data:`~swarmbox.core.messages.BROADCAST` and the destinations listed in ``reason``), a ``recv``
+row in the receiver's log stamped with the receiver's clock at the *arrival* instant (so latency
+below one tick is measurable), and a ``drop`` row in the ``net`` log.
 A message sent during tick k is handed to its receiver at the first tick at or after its arrival,
 and never earlier than tick k+1. All randomness comes from the generator given at construction.
 

@@ -37,7 +37,8 @@ class StateSink(Protocol):
 class FleetStateLog:
     """Called by the tick loop after every agent ticked, before the backend steps."""
 
-    def __init__(self, agents: Sequence[Any], backend: FleetArrays, sink: StateSink, every_ticks: int) -> None:
+    def __init__(self, agents: Sequence[Any], backend: FleetArrays, sink: StateSink,
+                 every_ticks: int) -> None:
         self.agents, self.backend, self.sink = list(agents), backend, sink
         self.every = every_ticks
         for agent in self.agents:

@@ -20,8 +20,8 @@ from swarmbox.core.swarm import Swarm
 from swarmbox.core.topology import Topology, build
 from swarmbox.faults import install_faults
 from swarmbox.hal.safety import SafetyLimits
-from swarmbox.record.fleet import FleetStateLog
 from swarmbox.net.medium import LinkSpec, SimMedium
+from swarmbox.record.fleet import FleetStateLog
 from swarmbox.record.schema import node_name
 from swarmbox.record.writer import Recorder
 from swarmbox.run.mission import Mission

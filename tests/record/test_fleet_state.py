@@ -70,4 +70,5 @@ def test_loader_reads_schema_1_and_2_messages_alike(run, tmp_path):
     for table in ("messages", "state", "events"):
         pd.testing.assert_frame_equal(new.tables[table], v1.tables[table])
     msgs = new.tables["messages"]
-    assert not (msgs["dst"] == -4).any() and len(msgs[msgs["kind"] == "send"]) > len(sends[sends["kind"] == "send"])
+    assert not (msgs["dst"] == -4).any()
+    assert len(msgs[(msgs["kind"] == "send") & (msgs["node"] == -1)]) > len(sends[sends["kind"] == "send"])

@@ -285,15 +285,16 @@ class SimBackend:
         g = self._gnss
         battery = np.clip(1.0 - self._air_s / self.params.battery_endurance_s, 0.0, 1.0)
         seq = g.seq.tolist()
-        fixes = zip(*g.fix_ned_m.tolist())
+        fixes = zip(*g.fix_ned_m.tolist(), strict=True)
         if not all(seq):
             fixes = [f if s else None for f, s in zip(fixes, seq, strict=True)]
         t, vehicles, n = self.t_s, self.vehicles, self.n
         self._tel = list(map(_new_telemetry, zip(
-            repeat(t, n), zip(*self._est.tolist()), zip(*self._vel.tolist()), self.ctrl.yaw_rad.tolist(),
-            fixes, seq, [v.armed for v in vehicles], (self.airborne == 0.0).tolist(),
-            [v.mode for v in vehicles], battery.tolist(), (g.ready(t) & ~self._crashed).tolist(),
-            zip(*self._pos.tolist()), repeat(True, n))))
+            repeat(t, n), zip(*self._est.tolist(), strict=True), zip(*self._vel.tolist(), strict=True),
+            self.ctrl.yaw_rad.tolist(), fixes, seq, [v.armed for v in vehicles],
+            (self.airborne == 0.0).tolist(), [v.mode for v in vehicles], battery.tolist(),
+            (g.ready(t) & ~self._crashed).tolist(), zip(*self._pos.tolist(), strict=True), repeat(True, n),
+            strict=False)))   # the repeats are as long as the fleet
         return self._tel
 
     # ---- fleet state export (the recorder's columnar state rows) --------------------------------

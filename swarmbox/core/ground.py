@@ -17,7 +17,7 @@ from typing import Protocol
 
 from swarmbox.api import DescendantState, GroundAlgorithm, GroundContext
 from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck
-from swarmbox.core.node import Node, call_hook
+from swarmbox.core.node import STAGE_OF, Node, call_hook, new_inferior_report
 from swarmbox.core.proximity import DIRECT_PAIRS_UP_TO, Episode, ProximityTracker, kd_tree
 from swarmbox.core.stages import TERMINAL, Stage
 
@@ -72,10 +72,17 @@ class GroundNode(Node):
     def _drain_inbox(self) -> None:
         inbox = self.inbox
         now = self.clock.now()   # one reading for the whole inbox: the clock stands still within a tick
+        inferiors, alive, wants = self.inferiors, self._alive, self._wants_reports
         for msg in inbox:
             kind = type(msg)
             if kind is Report:
-                if self.on_report(msg, now) and self._wants_reports:
+                inf = inferiors.get(msg.src)
+                if inf is not None and inf.alive and not wants:   # Node.on_report's usual case, inline
+                    inf.report, inf.silent_ticks = msg, 0
+                    inf.received += 1
+                    alive[msg.src] = new_inferior_report((msg.src, STAGE_OF[msg.stage], msg.complete,
+                                                           msg.pos_ned_m, msg.vel_ned_m_s, msg.data, now))
+                elif self.on_report(msg, now) and wants:
                     call_hook(self, "on_report", self.algorithm.on_report, self.ctx,
                               self._alive[msg.src])
             elif kind is TaskAck:

@@ -24,7 +24,7 @@ _ABORT = int(Stage.ABORT)
 #: Stage by code, for building views without an enum call per message.
 STAGE_OF = {int(s): s for s in Stage}
 #: InferiorReport(*fields) without the Python-level NamedTuple constructor (one per Report received).
-_new_inferior_report = partial(tuple.__new__, InferiorReport)
+new_inferior_report = partial(tuple.__new__, InferiorReport)
 _new_descendant = partial(tuple.__new__, DescendantState)
 
 
@@ -139,7 +139,7 @@ class Node:
                 self.event("topology", "inferior_rejoined", src)
             inf.report, inf.silent_ticks = rep, 0
             inf.received += 1
-        self._alive[src] = _new_inferior_report((src, STAGE_OF[rep.stage], rep.complete, rep.pos_ned_m,
+        self._alive[src] = new_inferior_report((src, STAGE_OF[rep.stage], rep.complete, rep.pos_ned_m,
                                                  rep.vel_ned_m_s, rep.data,
                                                  self.clock.now() if now is None else now))
         return True

@@ -188,14 +188,16 @@ class SimMedium:
         """Hand every message that has arrived by now (and was sent in an earlier tick) over."""
         t, tick = self._time.t_s + 1e-12, self._time.tick
         fifo, q, nodes = self._fifo, self._queue, self._nodes
+        last_ep = last_arrival = local = None   # a run of messages to one node arriving at one instant
         while fifo and fifo[0][0] <= t and fifo[0][1] < tick:
             item = fifo.popleft()
             dst = item[3]
             ep = nodes[dst] if type(dst) is int else None
             if ep is not None and ep.connected:   # the common case, inline: one receiver, reachable
                 arrival, _, _, _, msg, mtype, nbytes = item
-                ep.log((ep.clock.at(arrival), tick, "recv", msg.msg_id, mtype, msg.src, dst, nbytes,
-                        msg.t_sent_s, ""))
+                if ep is not last_ep or arrival != last_arrival:   # e.g. every Report to the ground
+                    last_ep, last_arrival, local = ep, arrival, ep.clock.at(arrival)
+                ep.log((local, tick, "recv", msg.msg_id, mtype, msg.src, dst, nbytes, msg.t_sent_s, ""))
                 ep.inbox.append(msg)
             else:
                 self._hand_over(item, tick)

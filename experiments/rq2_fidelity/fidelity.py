@@ -6,6 +6,18 @@
   nearest sample of the reference track (scipy cKDTree), over the whole log; horizontal RMSE. It
   ignores timing, so a late but identical path scores 0.
 - :func:`trajectories`: the overlaid tracks (paper Fig. 3), numbered markers at the launch points.
+
+On flights (:mod:`flights`: one drone's setpoint, estimated and true position on a 20 Hz clock), the
+measures the sim is tuned by (issue acceptance: lag within 0.1 s of PX4's; sim-vs-PX4 RMSE within
+PX4's own re-run RMSE + 0.05 m):
+
+- :func:`circle_window`: the time the setpoint moves (the circle), from the setpoint alone;
+- :func:`lag_s`: the time shift of the setpoint that best explains the flown path over the circle
+  (least squares, 0.01 s grid) — how far the vehicle trails a moving setpoint;
+- :func:`rmse_setpoint`: horizontal RMSE of the path against the setpoint over the circle, unshifted;
+- :func:`rmse_flights`: horizontal RMSE of two flights of one drone on a clock that starts at each
+  flight's circle start, from 5 s before it to 5 s after the circle (scheduling jitter of the
+  mission start removed, the response to the same setpoint compared).
 """
 
 from __future__ import annotations
@@ -18,6 +30,9 @@ from scipy.spatial import cKDTree
 
 EXECUTION, LANDING = 3, 4
 RESAMPLE_S = 0.1
+MOVING_M_S = 0.3      # the setpoint moves faster than this on the circle (1.2 m/s at the leader)
+MARGIN_S = 5.0        # compared before the circle starts and after it ends
+MAX_LAG_S = 3.0
 
 
 class Track:
@@ -99,4 +114,122 @@ def trajectories(runs: dict[str, Path], drones: list[int], *, ax=None):
     ax.grid(alpha=0.3)
     ax.legend(title="backend (line style)", loc="upper right")
     ax.set_title("RQ2 formation: estimated tracks per drone")
+    return fig
+
+
+# ---- measures on flights (flights.py tables) ------------------------------------------------------
+def _h(f: pd.DataFrame, prefix: str, t: np.ndarray) -> np.ndarray:
+    """(2, len(t)) horizontal series ``prefix``_n/_e of a flight, interpolated at ``t``."""
+    ft = f["t_s"].to_numpy()
+    return np.vstack([np.interp(t, ft, f[f"{prefix}_{a}"].to_numpy()) for a in ("n", "e")])
+
+
+def circle_window(f: pd.DataFrame) -> tuple[float, float]:
+    """(start, end) of the time the position setpoint moves faster than MOVING_M_S, in EXECUTION."""
+    inside = f[(f["stage"] == EXECUTION) & f["sp_n"].notna()]
+    t = inside["t_s"].to_numpy()
+    if len(t) < 3:
+        raise ValueError("the flight has no position setpoints in EXECUTION")
+    speed = np.hypot(np.gradient(inside["sp_n"].to_numpy(), t), np.gradient(inside["sp_e"].to_numpy(), t))
+    moving = t[speed > MOVING_M_S]
+    if len(moving) < 2:
+        raise ValueError("the setpoint never moves (not a circle flight)")
+    return float(moving[0]), float(moving[-1])
+
+
+def lag_s(f: pd.DataFrame) -> float:
+    """Time shift (s) of the setpoint that minimises the horizontal RMSE to the flown path, on the circle."""
+    t0, t1 = circle_window(f)
+    t = np.arange(t0, t1, RESAMPLE_S)
+    pos = _h(f, "pos", t)
+    taus = np.arange(0.0, MAX_LAG_S, 0.01)
+    err = [np.mean(np.sum((pos - _h(f, "sp", t - tau)) ** 2, axis=0)) for tau in taus]
+    return float(taus[int(np.argmin(err))])
+
+
+def rmse_setpoint(f: pd.DataFrame) -> float:
+    """Horizontal RMSE (m) of the flown path against the setpoint in force, over the circle."""
+    t0, t1 = circle_window(f)
+    t = np.arange(t0, t1, RESAMPLE_S)
+    return float(np.sqrt(np.mean(np.sum((_h(f, "pos", t) - _h(f, "sp", t)) ** 2, axis=0))))
+
+
+def rmse_flights(a: pd.DataFrame, b: pd.DataFrame) -> float:
+    """Horizontal RMSE (m) between two flights of one drone, each timed from its own circle start."""
+    (a0, a1), (b0, b1) = circle_window(a), circle_window(b)
+    rel = np.arange(-MARGIN_S, min(a1 - a0, b1 - b0) + MARGIN_S, RESAMPLE_S)
+    d = _h(a, "pos", a0 + rel) - _h(b, "pos", b0 + rel)
+    return float(np.sqrt(np.mean(np.sum(d ** 2, axis=0))))
+
+
+def climb_s(f: pd.DataFrame, frac: float = 0.9) -> float:
+    """Seconds from EXECUTION entry until the estimated altitude first covers ``frac`` of the climb
+    from where it was at EXECUTION entry to the first altitude setpoint (estimates can be offset:
+    PX4's reads -0.6 m on the ground, so the climb is taken relative to it)."""
+    inside = f[f["stage"] >= EXECUTION]
+    t, d = inside["t_s"].to_numpy(), inside["pos_d"].to_numpy()
+    target = inside["sp_d"].dropna()
+    if target.empty:
+        raise ValueError("the flight has no altitude setpoint")
+    up = np.flatnonzero(d[0] - d >= frac * (d[0] - float(target.iloc[0])))
+    if not len(up):
+        raise ValueError(f"the flight never climbed {frac:.0%} of the way to its first altitude setpoint")
+    return float(t[up[0]] - t[0])
+
+
+def table(sim: dict[int, pd.DataFrame], px4: dict[str, dict[int, pd.DataFrame]]) -> pd.DataFrame:
+    """The RQ2 table, one row per drone: lag, RMSE vs setpoint, sim-vs-PX4 and PX4-vs-PX4 RMSE.
+
+    With several PX4 runs, PX4's lag and RMSE vs setpoint are their means, sim-vs-PX4 is the mean
+    over the runs, and the noise floor is the mean over all pairs of runs.
+    """
+    labels = list(px4)
+    rows = []
+    for i, s in sim.items():
+        runs = [px4[k][i] for k in labels if i in px4[k]]
+        row = {"drone": i, "sim_lag_s": lag_s(s), "sim_rmse_sp_m": rmse_setpoint(s)}
+        if runs:
+            pairs = [(x, y) for k, x in enumerate(runs) for y in runs[k + 1:]]
+            row.update({
+                "px4_lag_s": float(np.mean([lag_s(r) for r in runs])),
+                "px4_lag_range_s": "–".join(f"{v:.2f}" for v in sorted({lag_s(r) for r in runs})),
+                "px4_rmse_sp_m": float(np.mean([rmse_setpoint(r) for r in runs])),
+                "sim_vs_px4_m": float(np.mean([rmse_flights(s, r) for r in runs])),
+                "px4_vs_px4_m": float(np.mean([rmse_flights(x, y) for x, y in pairs])) if pairs else np.nan,
+                "px4_pairs_m": "/".join(f"{rmse_flights(x, y):.2f}" for x, y in pairs),
+            })
+            row["lag_ok"] = abs(row["sim_lag_s"] - row["px4_lag_s"]) <= 0.1
+            row["rmse_ok"] = bool(row["sim_vs_px4_m"] <= row["px4_vs_px4_m"] + 0.05)
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def overlay(sim: dict[int, pd.DataFrame], px4: dict[str, dict[int, pd.DataFrame]]):
+    """Fig. 3-style overlay: per drone the setpoint (thin grey), each PX4 flight (dashed) and the
+    sim (solid), estimated north/east over EXECUTION."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.5, 6.0))
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, s in sim.items():
+        c = colors[i % len(colors)]
+        ex = s[s["stage"] == EXECUTION]
+        ax.plot(ex["sp_e"], ex["sp_n"], "-", color="0.6", lw=0.8, label="setpoint" if i == 0 else None)
+        for k, runs in enumerate(px4.values()):
+            if i in runs:
+                f = runs[i][runs[i]["stage"] == EXECUTION]
+                ax.plot(f["pos_e"], f["pos_n"], "--", color=c, lw=1.0, alpha=0.8,
+                        label="PX4 SIH" if i == 0 and k == 0 else None)
+        ax.plot(ex["pos_e"], ex["pos_n"], "-", color=c, lw=1.4, label="sim" if i == 0 else None)
+        ax.annotate(str(i), (float(ex["pos_e"].iloc[0]), float(ex["pos_n"].iloc[0])), ha="center",
+                    va="center", fontsize=9, bbox={"boxstyle": "circle", "fc": "white", "ec": c})
+    ax.set_xlabel("east (m)")
+    ax.set_ylabel("north (m)")
+    ax.set_aspect("equal")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper right")
+    ax.set_title("RQ2 formation: sim vs PX4 SIH, estimated tracks")
     return fig

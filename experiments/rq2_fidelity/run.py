@@ -1,10 +1,14 @@
 """RQ2: fly the paper's formation on ``sim``, on ``mavsim`` (the px4 bridge over UDP) and, when a
 PX4 build is given, on PX4 SITL; write the per-drone RMSE table, the overlaid trajectories (paper
-Fig. 3) and the runtime's overhead on the px4 path.
+Fig. 3) and the runtime's overhead on the px4 path; and the sim-vs-PX4 fidelity table (lag behind
+the setpoint, RMSE vs setpoint, sim-vs-PX4 and PX4-vs-PX4 RMSE) against PX4 flights — fresh ones
+with ``--px4-build``, else the committed reference ``data/px4_formation.parquet``.
 
     python experiments/rq2_fidelity/run.py                   # full mission (about 2 minutes)
     python experiments/rq2_fidelity/run.py --ci              # shortened mission (about 40 s)
     python experiments/rq2_fidelity/run.py --px4-build ~/PX4-Autopilot   # also PX4 SITL (SIH)
+    python experiments/rq2_fidelity/run.py --px4-only --px4-build ../shared/px4-sitl --px4-runs 2 \
+        --save-reference experiments/rq2_fidelity/data/px4_formation.parquet   # re-record PX4 at 1x
 
 Each run is a separate process (``--one``), so the runner's memory is measured without this
 script's pandas and matplotlib.
@@ -28,10 +32,20 @@ CI_MISSION = ["algo.params.start_s=2", "algo.params.angular_rate_rad_s=0.6", "al
 DRONES = [0, 1, 2, 3]
 
 
-def backends(speed: float, px4_build: str | None) -> dict[str, list[str]]:
-    out = {"sim": ["backend=sim"], "mavsim": ["backend=mavsim", f"run.speed={speed:g}"]}
+REFERENCE = Path(__file__).resolve().parent / "data" / "px4_formation.parquet"
+
+
+def backends(speed: float, px4_build: str | None, px4_runs: int = 1, px4_speed: float = 1.0,
+             mavsim: bool = True) -> dict[str, list[str]]:
+    """label -> overrides of every run; PX4 runs are ``px4_sitl`` or ``px4_1``, ``px4_2``, ..."""
+    out = {"sim": ["backend=sim"], "sim_px4": ["backend=sim_px4"]}
+    if mavsim:
+        out["mavsim"] = ["backend=mavsim", f"run.speed={speed:g}"]
     if px4_build:
-        out["px4_sitl"] = ["backend=px4", f"backend.px4_build={px4_build}", f"run.speed={min(speed, 2.0):g}"]
+        px4 = ["backend=px4", f"backend.px4_build={px4_build}", "backend.ground_truth=true",
+               f"run.speed={px4_speed:g}"]
+        labels = ["px4_sitl"] if px4_runs == 1 else [f"px4_{k + 1}" for k in range(px4_runs)]
+        out.update({label: px4 for label in labels})
     return out
 
 
@@ -108,6 +122,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--speed", type=float, default=4.0, help="run.speed of the mavsim run")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--px4-build", default=os.environ.get("SWARMBOX_PX4_BUILD"))
+    ap.add_argument("--px4-runs", type=int, default=1, help="PX4 repetitions (>= 2 gives the noise floor)")
+    ap.add_argument("--px4-speed", type=float, default=1.0, help="PX4_SIM_SPEED_FACTOR of the PX4 runs")
+    ap.add_argument("--px4-only", action="store_true", help="no mavsim run (sim and PX4 only)")
+    ap.add_argument("--reference", type=Path, default=REFERENCE,
+                    help="recorded PX4 flights compared with the sim when no PX4 run is made")
+    ap.add_argument("--save-reference", type=Path, help="keep this run's PX4 flights in this file")
     ap.add_argument("--out", type=Path, default=ROOT / "results" / "rq2_fidelity")
     ap.add_argument("--one", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -116,7 +136,8 @@ def main(argv: list[str] | None = None) -> int:
     out = args.out / time.strftime("%Y-%m-%d_%H-%M-%S")
     common = [*MISSION, *(CI_MISSION if args.ci else []), f"seed={args.seed}"]
     runs: dict[str, Path] = {}
-    for label, extra in backends(args.speed, args.px4_build).items():
+    plan = backends(args.speed, args.px4_build, args.px4_runs, args.px4_speed, not args.px4_only)
+    for label, extra in plan.items():
         run_dir = out / label
         print(f"[rq2] {label}: {' '.join(extra)}", flush=True)
         code = subprocess.call([sys.executable, __file__, "--one", str(run_dir), *common, *extra], cwd=ROOT)
@@ -124,7 +145,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"[rq2] {label} run failed (see {run_dir}/run.json)", file=sys.stderr)
             return 1
         runs[label] = run_dir
-    return report(runs, out)
+    code = report(runs, out) if len(runs) > 1 else 0
+    return code or fidelity_report(runs, out, args)
 
 
 def markdown(frame) -> str:
@@ -151,6 +173,48 @@ def report(runs: dict[str, Path], out: Path) -> int:
             + "\n\n## Overhead\n\n" + markdown(overhead) + "\n")
     (out / "fidelity.md").write_text(text)
     trajectories(runs, DRONES).savefig(out / "fig3_trajectories.png", dpi=130, bbox_inches="tight")
+    print(text + f"\n[rq2] written to {out}")
+    return 0
+
+
+def fidelity_report(runs: dict[str, Path], out: Path, args: argparse.Namespace) -> int:
+    """The sim-vs-PX4 table (fidelity.table) and its overlay, against this run's PX4 flights or
+    the recorded reference; optionally keep the PX4 flights as the new reference."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from fidelity import climb_s, overlay, table
+    from flights import load_reference, run_flights, save_reference
+
+    px4_dirs = {label: d for label, d in runs.items() if label.startswith("px4")}
+    if px4_dirs:
+        px4 = {label: run_flights(d) for label, d in px4_dirs.items()}
+        source = "this run"
+        if args.save_reference:
+            note = {"note": f"RQ2 formation on PX4 SITL at speed {args.px4_speed:g}; load before: "
+                            f"{os.getloadavg()}", "sample_s": 0.05, "runs": {}}
+            save_reference(px4_dirs, args.save_reference, note)
+    elif args.ci:
+        print("[rq2] --ci flies a shorter mission than the recorded PX4 flights: no sim-vs-PX4 table")
+        return 0
+    elif args.reference.is_file():
+        px4, source = load_reference(args.reference), str(args.reference.relative_to(ROOT))
+    else:
+        print(f"[rq2] no PX4 flights: give --px4-build or keep {args.reference}", file=sys.stderr)
+        return 0
+    import pandas as pd
+
+    sims = {label: run_flights(runs[label]) for label in ("sim", "sim_px4") if label in runs}
+    tab = pd.concat([table(f, px4).assign(backend=label) for label, f in sims.items()])
+    tab = tab[["backend", *[c for c in tab.columns if c != "backend"]]]
+    climbs = {label: [climb_s(f) for f in flights.values()] for label, flights in sims.items()}
+    climbs["px4"] = [climb_s(f) for r in px4.values() for f in r.values()]
+    tab.to_csv(out / "fidelity_px4.csv", index=False)
+    text = (f"## Sim vs PX4 (PX4 flights: {source}; {len(px4)} run(s))\n\n" + markdown(tab.round(3))
+            + "\n\nclimb to 90 % of the first altitude setpoint (s): "
+            + "; ".join(f"{label} " + ", ".join(f"{v:.2f}" for v in vals) for label, vals in climbs.items())
+            + "\n")
+    (out / "fidelity_px4.md").write_text(text)
+    best = sims.get("sim_px4", sims["sim"])
+    overlay(best, px4).savefig(out / "fig3_sim_vs_px4.png", dpi=130, bbox_inches="tight")
     print(text + f"\n[rq2] written to {out}")
     return 0
 

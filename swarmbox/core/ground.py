@@ -140,9 +140,12 @@ class GroundNode(Node):
         return {d.drone_id: d for d in self.descendants()}
 
     def _proximity_alerts(self) -> None:
-        """ProxAlert to every alive direct inferior in an alerted pair; episodes logged as events.
+        """ProxAlert to both drones of every alerted pair; episodes logged as events.
 
-        A drone whose last pair ended gets one empty ProxAlert (all clear).
+        A drone whose last pair ended gets one empty ProxAlert (all clear). Drones below a direct
+        inferior (trees, leader-follower) are addressed directly, not relayed: every medium delivers
+        to any node id (as the reference's per-drone alert topic did), and a relay would add a tick
+        per level and fail with any drone on the way.
         """
         view = self.descendants()
         before = {d for pair in self.prox_pairs for d in pair}
@@ -159,8 +162,7 @@ class GroundNode(Node):
             near.setdefault(a, []).append(by_id[b])
             near.setdefault(b, []).append(by_id[a])
         for drone_id in sorted(near.keys() | before):
-            inf = self.inferiors.get(drone_id)
-            if inf is not None and inf.alive:
+            if drone_id in by_id:   # alive, directly or through its superior's Report
                 self.net.send(ProxAlert(self.next_msg_id(), self.clock.now(), GROUND_ID, drone_id,
                                         tuple(near.get(drone_id, ()))), drone_id)
 

@@ -1,4 +1,4 @@
-"""The dashboard: turns successive snapshots and event rows into a rich renderable.
+"""The dashboard: turns successive snapshots and event rows into the lines of the screen.
 
 Per drone, over the last ``window_s`` seconds of ground time:
 
@@ -18,12 +18,9 @@ import math
 from collections import deque
 from dataclasses import dataclass, field
 
-from rich.console import Group
-from rich.rule import Rule
-from rich.text import Text
-
 from swarmbox.core.stages import Stage
 from swarmbox.monitor.feed import Snapshot
+from swarmbox.monitor.screen import Line
 from swarmbox.record.schema import NO_SUBJECT
 
 
@@ -39,7 +36,7 @@ def _node(node_id: int) -> str:
 
 
 class DashboardView:
-    """Keeps the per-drone history the dashboard needs and renders it."""
+    """Keeps the per-drone history the dashboard needs and lays out its lines."""
 
     def __init__(self, title: str, window_s: float = 5.0, max_events: int = 8, max_rows: int = 40) -> None:
         self.title, self.window_s = title, window_s
@@ -81,7 +78,7 @@ class DashboardView:
         else:
             about = "" if subject in (NO_SUBJECT, node_id) else f" ({_node(subject)})"
             text = f"{kind}/{name}{about}{_short(data)}"
-        line = f"{t_s:8.2f}  {_node(node_id):<8} {text}"
+        line = f"{t_s:8.2f}  {_node(node_id):<8} {text}".replace("\n", " ")
         self.events.append(line)
         return line
 
@@ -102,32 +99,29 @@ class DashboardView:
         return min(1.0, max(0.0, 1.0 - (got1 - got0) / (tick1 - tick0)))
 
     # -- rendering ------------------------------------------------------------------------------
-    def render(self) -> Group:
+    def lines(self) -> list[Line]:
+        """The screen as fixed-width lines of ``(text, style)`` spans (see :mod:`.screen`)."""
         snap = self.snap
         if snap is None:
-            return Group(Text(f"{self.title}: waiting for the ground node...", style="bold"))
-        return Group(self._header(snap), self._table(snap), self._events_panel())
+            return [((f"{self.title}: waiting for the ground node...", "bold"),)]
+        return [*self._header(snap), *self._table(snap), *self._events()]
 
-    def _header(self, snap: Snapshot) -> Text:
+    def _header(self, snap: Snapshot) -> list[Line]:
         lost = sum(1 for r in snap.drones if not r.alive)
         stage_style = "bold red" if snap.stage == Stage.ABORT.name else "bold green"
-        t = Text(no_wrap=True, overflow="ellipsis")
-        t.append(self.title, style="bold")
-        t.append(f"   t {snap.t_s:.1f} s   {self.tick_hz:.0f} ticks/s\nstage ")
-        t.append(snap.stage, style=stage_style)
-        t.append(f" {snap.stage_time_s:.1f} s   drones {snap.alive}/{snap.swarm_size} alive")
+        second: Line = (("stage ", ""), (snap.stage, stage_style),
+                        (f" {snap.stage_time_s:.1f} s   drones {snap.alive}/{snap.swarm_size} alive", ""))
         if lost:
-            t.append(f"   {lost} lost", style="bold red")
+            second += ((f"   {lost} lost", "bold red"),)
+        out = [((self.title, "bold"), (f"   t {snap.t_s:.1f} s   {self.tick_hz:.0f} ticks/s", "")), second]
         if snap.prox:
             pairs = ", ".join(f"{a}-{b} {d:.1f} m" for (a, b), d in snap.prox[:6])
-            t.append(f"\nPROXIMITY {pairs}", style="bold yellow")
-        return t
+            out.append(((f"PROXIMITY {pairs}", "bold yellow"),))
+        return out
 
-    def _table(self, snap: Snapshot) -> Text:
-        """Fixed-width lines in one Text: a rich Table costs ten times more to lay out per frame."""
-        out = Text(no_wrap=True, overflow="ellipsis")
-        out.append(f"{'drone':>5}  {'link':<11}{'stage':<12}{'N m':>8}{'E m':>8}{'alt m':>7}{'m/s':>6}"
-                   f"{'lat ms':>8}{'loss %':>8}{'disc m':>8}\n", style="bold")
+    def _table(self, snap: Snapshot) -> list[Line]:
+        out: list[Line] = [((f"{'drone':>5}  {'link':<11}{'stage':<12}{'N m':>8}{'E m':>8}{'alt m':>7}"
+                             f"{'m/s':>6}{'lat ms':>8}{'loss %':>8}{'disc m':>8}", "bold"),)]
         near = {d for pair, _ in snap.prox for d in pair}
         shown = 0
         # lost drones first, then those in a proximity alert: on a big swarm they must stay visible
@@ -139,37 +133,32 @@ class DashboardView:
             n, e, d = rep.pos_ned_m
             lat, loss = self.latency_ms(row.drone_id), self.loss(row.drone_id)
             hist = self.history.get(row.drone_id)
-            out.append(f"{row.drone_id:>5}  ", style="bold yellow" if row.drone_id in near else "")
-            if row.alive:
-                out.append(f"{'alive':<11}", style="green")
-            else:
-                out.append(f"{'LOST ' + format(row.silent_ticks * snap.tick_s, '.1f') + 's':<11}",
-                           style="bold red")
-            out.append(f"{_stage(rep.stage):<12}{n:8.1f}{e:8.1f}{-d + 0.0:7.1f}"
-                       f"{math.hypot(*rep.vel_ned_m_s):6.1f}{_num(lat, '{:8.1f}')}"
-                       f"{_num(None if loss is None else 100 * loss, '{:8.1f}')}"
-                       f"{_num(hist.disc_m if hist else None, '{:8.2f}')}\n")
+            link = (("alive", "green") if row.alive
+                    else ("LOST " + format(row.silent_ticks * snap.tick_s, ".1f") + "s", "bold red"))
+            out.append(((f"{row.drone_id:>5}  ", "bold yellow" if row.drone_id in near else ""),
+                        (f"{link[0]:<11}", link[1]),
+                        (f"{_stage(rep.stage):<12}{n:8.1f}{e:8.1f}{-d + 0.0:7.1f}"
+                         f"{math.hypot(*rep.vel_ned_m_s):6.1f}{_num(lat, '{:8.1f}')}"
+                         f"{_num(None if loss is None else 100 * loss, '{:8.1f}')}"
+                         f"{_num(hist.disc_m if hist else None, '{:8.2f}')}", "")))
         for fw in snap.forwarded:
             if shown >= self.max_rows:
                 break
             shown += 1
             n, e, d = fw.pos_ned_m
-            out.append(f"{fw.drone_id:>5}  ")
-            out.append(f"{'via sup.':<11}", style="cyan")
-            out.append(f"{_stage(fw.stage):<12}{n:8.1f}{e:8.1f}{-d + 0.0:7.1f}\n")
+            out.append(((f"{fw.drone_id:>5}  ", ""), (f"{'via sup.':<11}", "cyan"),
+                        (f"{_stage(fw.stage):<12}{n:8.1f}{e:8.1f}{-d + 0.0:7.1f}", "")))
         joined = {r.drone_id for r in snap.drones} | {f.drone_id for f in snap.forwarded}
         hidden, waiting = len(joined) - shown, snap.swarm_size - len(joined)
         notes = [f"{hidden} more not shown" if hidden > 0 else "",
                  f"{waiting} waiting" if waiting > 0 else ""]
         if any(notes):
-            out.append(", ".join(x for x in notes if x), style="dim")
-        out.rstrip()
+            out.append(((", ".join(x for x in notes if x), "dim"),))
         return out
 
-    def _events_panel(self) -> Group:
-        body = Text("\n".join(self.events) if self.events else "(none yet)", no_wrap=True,
-                    overflow="ellipsis")
-        return Group(Rule("events", align="left", style="dim"), body)
+    def _events(self) -> list[Line]:
+        body = list(self.events) or ["(none yet)"]
+        return [(("── events " + "─" * 60, "dim"),), *(((line, ""),) for line in body)]
 
 
 def _stage(code: int) -> str:

@@ -126,7 +126,7 @@ class RunConfig:
     speed: float = 1.0              # real-time backends: wall-clock pacing factor (SITL speed-up)
     progress: bool = True           # progress lines on stderr for long runs (off while the monitor shows)
     monitor: str = "auto"           # live dashboard: auto (real-time backends, on a terminal) | on | off
-    monitor_hz: float = 4.0         # Hz, dashboard refresh rate
+    monitor_hz: float = 2.0         # Hz, dashboard refresh rate
     # stream live to Rerun: a viewer's URL (rerun+http://127.0.0.1:9876/proxy) or an .rrd path
     rerun: Optional[str] = None
     out_dir: Optional[str] = None   # default: Hydra's output directory

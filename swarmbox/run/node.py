@@ -109,7 +109,8 @@ class NodeProcess:
             on_reject=self._on_reject)
         # One node per recorder; never flushed mid-run, so the run-wide spill directory stays unused
         self.recorder = Recorder(run_dir)
-        log = self.recorder.node(node_id)
+        self.monitor = ground_monitor(cfg, m.name) if node_id == GROUND_ID else None
+        log = (self.monitor.tap(self.recorder) if self.monitor else self.recorder).node(node_id)
         inbox = self.medium.register(node_id, self.clock, log.appender("messages"))
         common = dict(time=self.time, clock=self.clock, net=self.medium, inbox=inbox, log=log,
                       timing=self.timing, mission=m.info(),
@@ -124,6 +125,8 @@ class NodeProcess:
         if node_id == GROUND_ID:
             from swarmbox.core.ground import GroundNode  # (scipy: the ground only, agents stay small)
             self.node = GroundNode(build._algorithm(cfg.algo.ground, GroundAlgorithm, "ground"), **common)
+            if self.monitor:
+                self.monitor.watch(self.node)
         else:
             self.backend = build.backend_of(cfg, m, self.timing.tick_s, seed, run_dir / "nodes" / self.name,
                                             drone_ids=[node_id])
@@ -200,6 +203,11 @@ class NodeProcess:
     def close(self, result: dict[str, Any]) -> None:
         """Stop the vehicle link and the session, finish the logs, write ``nodes/<node>.json``."""
         elapsed = max(wall.time() - self.epoch, 1e-9)
+        if self.monitor is not None:   # before the stats, so that its last frame is counted
+            try:
+                result["monitor"] = self.monitor.stop(ground=self.node)
+            except Exception as exc:  # noqa: BLE001 - watching must never cost the node its logs
+                result["monitor"] = {"error": f"{type(exc).__name__}: {exc}"}
         result.update(proc_stats(), wall_s=elapsed, bytes_out=self.medium.bytes_out,
                       bytes_in=self.medium.bytes_in, rejected=self.rejected)
         try:
@@ -210,6 +218,17 @@ class NodeProcess:
             self.recorder.close()
             write_atomic(self.run_dir / "nodes" / f"{self.name}.json",
                          json.dumps(result, indent=2, sort_keys=True))
+
+
+def ground_monitor(cfg: DictConfig, mission_name: str) -> Any:
+    """The ground process's live dashboard (``run.monitor``; the launcher hands it its terminal)."""
+    from swarmbox import monitor
+
+    dashboard = monitor.wanted(cfg.run.monitor, realtime=True, multirun=False)
+    if not dashboard and not cfg.run.rerun:
+        return None
+    title = f"SwarmBox {mission_name} seed={cfg.seed} (processes)"
+    return monitor.create(title, cfg.run.monitor_hz, dashboard=dashboard, rerun=cfg.run.rerun)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -26,6 +26,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from swarmbox import monitor
 from swarmbox.core.messages import GROUND_ID
 from swarmbox.record.schema import SCHEMA_VERSION, node_name
 from swarmbox.run import build, mission, node_faults
@@ -95,6 +96,10 @@ class NodeSet:
         self.nodes_dir = run_dir / "nodes"
         self.ids = [GROUND_ID, *drone_ids]
         self.procs: dict[int, subprocess.Popen[bytes]] = {}
+        from swarmbox.run.runner import _in_sweep
+
+        # the live dashboard draws from the ground process: it gets this process's terminal (stderr)
+        self.dashboard = monitor.wanted(cfg.run.monitor, realtime=True, multirun=_in_sweep())
 
     def start(self, secrets_env: dict[str, str], vehicles: dict[str, dict[str, Any]]) -> None:
         self.nodes_dir.mkdir(parents=True, exist_ok=True)
@@ -111,7 +116,8 @@ class NodeSet:
             with open(self.nodes_dir / f"{node_name(i)}.log", "wb") as out:
                 self.procs[i] = subprocess.Popen(
                     [sys.executable, "-m", "swarmbox.run.node", *role, "--run-dir", str(self.run_dir)],
-                    stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT, env=env,
+                    stdin=subprocess.DEVNULL, stdout=out, env=env,
+                    stderr=None if i == GROUND_ID and self.dashboard else subprocess.STDOUT,
                     start_new_session=True)
         pids = {node_name(i): p.pid for i, p in self.procs.items()}
         (self.nodes_dir / "pids.json").write_text(json.dumps(pids))

@@ -61,6 +61,34 @@ def test_alerts_exactly_the_pairs_that_came_within_10_m_with_start_and_end(run):
     assert set(prox["dst"]) == {0, 1, 2}
 
 
+@pytest.mark.parametrize("topology", ["tree", "leader_follower"])
+def test_drones_below_a_direct_inferior_are_alerted_too(run, topology):
+    """Drones 1 and 2 report through drone 0 here: the ground still alerts them, addressed directly."""
+    manifest, d = run(*CROSSING, f"topology={topology}")
+    assert manifest["status"] == "ok", manifest["reason"]
+    reports = table(d, "ground", "messages")
+    reports = reports[(reports["kind"] == "recv") & (reports["type"] == "report")]
+    assert set(reports["src"]) == {0}                # the ground hears only drone 0 directly
+    episodes, truth = _episodes(d), _close_ticks(d, 10.0)
+    assert set(truth) == set(episodes) == {(0, 1), (0, 2)}
+    for pair, (first, last, _) in truth.items():
+        ep, end_t = episodes[pair]
+        # a forwarded position is one more Report trip (one tick) older than a direct one
+        assert first * TICK_S < ep["start_t_s"] <= (first + 3) * TICK_S + 1e-9, pair
+        assert (last + 1) * TICK_S < end_t <= (last + 4) * TICK_S + 1e-9, pair
+    for i, others in {0: {1, 2}, 1: {0}, 2: {0}, 3: set()}.items():
+        ev = table(d, f"drone_{i}", "events")
+        warned = {json.loads(x)["other"] for x in ev.loc[ev["name"] == "near_miss_warning", "data"]}
+        assert warned == others, i
+    sent = table(d, "ground", "messages")
+    prox = sent[(sent["kind"] == "send") & (sent["type"] == "prox")]
+    assert set(prox["dst"]) == {0, 1, 2}
+    for i in (1, 2):   # received straight from the ground, then the all clear
+        got = table(d, f"drone_{i}", "messages")
+        got = got[(got["kind"] == "recv") & (got["type"] == "prox")]
+        assert len(got) > 0 and set(got["src"]) == {-1}, i
+
+
 def test_the_time_window_warns_before_the_pair_is_close(run):
     manifest, d = run(*CROSSING, "run.proximity_window_s=3")
     assert manifest["status"] == "ok", manifest["reason"]

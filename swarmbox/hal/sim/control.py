@@ -1,10 +1,18 @@
 """A PX4-like cascaded multicopter controller, vectorized over a fleet.
 
 position P → velocity setpoint (saturated horizontally and vertically) → velocity PID with PX4's
-anti-reset windup → acceleration setpoint (saturated by the acceleration and tilt limits). One
-addition to PX4's loop: a feed-forward of the airframe's linear drag at the velocity setpoint (PX4's
-integrator has to learn it), so the vehicle settles on a saturated velocity setpoint without
-overshooting the speed limits. Every kind
+anti-reset windup → acceleration setpoint (saturated by the acceleration and tilt limits). Where it
+may differ from PX4 (``conf/backend/sim.yaml`` vs ``sim_px4.yaml``, docs/fidelity.md):
+
+- ``vel_drag_ff``: the default feeds the airframe's linear drag forward at the velocity setpoint, so
+  the vehicle settles on a saturated velocity setpoint without overshooting the speed limits; PX4
+  (0) leaves drag to the velocity integrator, so on a moving setpoint the vehicle trails by the
+  position loop's 1/MPC_XY_P plus what drag costs while the integrator catches up (the RQ2 lag);
+- ``mc_roll_p``: PX4's tilt follows its setpoint with time constant 1/MC_ROLL_P (0: at once);
+- ``acc_hor_max_offboard``: PX4 limits offboard setpoints by the tilt only, MPC_ACC_HOR_MAX acts in
+  its automatic modes.
+
+Every kind
 of target is one column of the same arrays, so one :meth:`CascadedController.update` serves the whole
 fleet with no per-drone Python:
 
@@ -56,15 +64,19 @@ class CascadedController:
         self.vmax_h_m_s = np.full(n, p.mpc_xy_vel_max_m_s)
         self.vmin_d_m_s = np.full(n, -p.mpc_z_vel_max_up_m_s)   # most negative vertical velocity (up)
         self.vmax_d_m_s = np.full(n, p.mpc_z_vel_max_dn_m_s)
+        self.tko_up_m_s = np.full(n, np.inf)   # takeoff ramp: climb-rate limit on top of vmin_d (inf: none)
+        self.ramping = False                    # any column with a finite takeoff-ramp limit
         self.amax_d_m_s2 = np.full(n, p.mpc_acc_down_max_m_s2)  # gravity for thrust-off columns
         self.integ_m_s2, self._prev_vel = z3(), z3()
         self.yaw_rad, self.yaw_tgt_rad = np.zeros(n), np.zeros(n)
         self._yaw_busy = False
         self.acc_ned_m_s2 = z3()
+        self._att_acc = np.zeros((2, n))   # horizontal acceleration the attitude has reached so far
+        self._att_alpha = 1.0
         self._vsp, self._tmp, self._h, self._lim_h, self._lim_up = z3(), z3(), *(np.zeros(n) for _ in "abc")
         self._dt_s = -1.0
         self._kp_v, self._ki_dt_v, self._kd_dt_v = z3(), z3(), z3()   # gains × loop_on (× dt terms)
-        self._drag_v = z3()                                           # drag / mass × loop_on
+        self._drag_v = z3()                                           # ff × drag / mass × loop_on
         # row views, made once: slicing costs as much as a small ufunc
         self._vsp_rows, self._acc_rows = tuple(self._vsp), tuple(self.acc_ned_m_s2)
         self.set_thrust_off(slice(None))
@@ -108,6 +120,17 @@ class CascadedController:
         self.acc_ff_ned_m_s2[2, i] = GRAVITY_M_S2
         self.amax_d_m_s2[i] = GRAVITY_M_S2
 
+    def set_offboard_limits(self, i: int, offboard: bool) -> None:
+        """Horizontal acceleration limit: the tilt limit alone on offboard setpoints (PX4's
+        PositionControl), MPC_ACC_HOR_MAX as well in the automatic modes."""
+        tilt_only = offboard and not self.p.acc_hor_max_offboard
+        self._ah_max[i] = self.p.acc_tilt_limit_m_s2 if tilt_only else self.p.acc_hor_limit_m_s2
+
+    def set_takeoff_ramp(self, i: int, up_m_s: float) -> None:
+        """Limit drone ``i``'s climb rate to ``up_m_s`` (the takeoff ramp); ``inf`` lifts the limit."""
+        self.tko_up_m_s[i] = up_m_s
+        self.ramping = bool(np.isfinite(self.tko_up_m_s).any())
+
     def reset_integrator(self, i: int) -> None:
         self.integ_m_s2[:, i] = 0.0
 
@@ -129,8 +152,12 @@ class CascadedController:
     # ---- the fleet-wide update ----------------------------------------------------------------
     def _refresh_gains(self, dt_s: float) -> None:
         self._dt_s = dt_s
+        # attitude loop: the tilt (so the horizontal acceleration) follows its setpoint with time
+        # constant 1/MC_ROLL_P (PX4's attitude P gain; the rate loop is much faster)
+        rate = self.p.mc_roll_p
+        self._att_alpha = 1.0 if rate <= 0 else -math.expm1(-dt_s * rate)
         np.multiply(self._kp_vel, self.loop_on, out=self._kp_v)
-        np.multiply(self.p.drag_n_s_m / self.p.mass_kg, self.loop_on, out=self._drag_v)
+        np.multiply(self.p.vel_drag_ff * self.p.drag_n_s_m / self.p.mass_kg, self.loop_on, out=self._drag_v)
         np.multiply(self._ki_vel * dt_s, self.loop_on, out=self._ki_dt_v)
         np.multiply(self._kd_vel / dt_s, self.loop_on, out=self._kd_dt_v)
 
@@ -145,6 +172,7 @@ class CascadedController:
         self._velocity_setpoint(pos_ned_m)
         self._velocity_pid(vel_ned_m_s)
         self._limit_and_integrate(accel_scale)
+        self._attitude_lag()
         if self._yaw_busy:
             self._turn(dt_s)
         return self.acc_ned_m_s2
@@ -158,6 +186,8 @@ class CascadedController:
         vsp += self.vel_ff_ned_m_s
         _saturate_h(vn, ve, self.vmax_h_m_s, self._h)
         np.maximum(vd, self.vmin_d_m_s, out=vd)
+        if self.ramping:
+            np.maximum(vd, -self.tko_up_m_s, out=vd)
         np.minimum(vd, self.vmax_d_m_s, out=vd)
 
     def _velocity_pid(self, vel_ned_m_s: np.ndarray) -> None:
@@ -199,6 +229,16 @@ class CascadedController:
         np.multiply(self._vsp_rows[2], h, out=self._vsp_rows[2])
         vsp *= self._ki_dt_v
         self.integ_m_s2 += vsp
+
+    def _attitude_lag(self) -> None:
+        """The horizontal rows of acc become the first-order lagged tilt (controller state is untouched)."""
+        if self._att_alpha >= 1.0:
+            return
+        att, acc_h = self._att_acc, self.acc_ned_m_s2[:2]
+        acc_h -= att
+        acc_h *= self._att_alpha
+        att += acc_h
+        np.copyto(acc_h, att)
 
     def _turn(self, dt_s: float) -> None:
         err = self.yaw_tgt_rad - self.yaw_rad

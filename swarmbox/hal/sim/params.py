@@ -18,7 +18,7 @@ GRAVITY_M_S2 = 9.80665
 class SimParams:
     """Every tunable of :class:`swarmbox.hal.sim.backend.SimBackend`, with its unit in the name."""
 
-    # airframe (x500-like)
+    # airframe (x500-like; backend=sim_px4: PX4's SIH quadrotor, SIH_MASS and SIH_KDV)
     mass_kg: float = 1.5
     radius_m: float = 0.3                 # collision radius
     drag_n_s_m: float = 0.3               # linear drag: force = -drag * velocity
@@ -45,6 +45,11 @@ class SimParams:
     mpc_yawrauto_max_deg_s: float = 45.0
     mpc_land_speed_m_s: float = 0.7
     mpc_tko_speed_m_s: float = 1.5
+    com_spoolup_time_s: float = 1.0       # COM_SPOOLUP_TIME: with a ramp, no lift this long after arming
+    mpc_tko_ramp_t_s: float = 0.0         # MPC_TKO_RAMP_T (PX4: 3 s): climb-rate limit ramp; 0: none
+    mc_roll_p: float = 0.0                # 1/s, MC_ROLL_P (PX4: 4): tilt time constant 1/P; 0: instant tilt
+    vel_drag_ff: float = 1.0              # fraction of the drag fed forward at the velocity setpoint (PX4: 0)
+    acc_hor_max_offboard: bool = True     # MPC_ACC_HOR_MAX limits offboard setpoints too (PX4: tilt only)
     # automatic modes
     takeoff_acceptance_m: float = 0.3     # TAKEOFF switches to HOLD within this of the target altitude
     hold_brake_speed_m_s: float = 0.2     # HOLD brakes (velocity 0) until this slow, then holds position
@@ -85,11 +90,15 @@ class SimParams:
                      "mpc_z_vel_max_dn_m_s", "mpc_land_speed_m_s", "mpc_tko_speed_m_s"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"sim backend parameter {name!r} must be > 0")
-        if self.est_gain > 1 or self.mpc_tiltmax_air_deg >= 90:
-            raise ValueError("est_gain must be <= 1 and mpc_tiltmax_air_deg < 90")
+        if self.est_gain > 1 or self.mpc_tiltmax_air_deg >= 90 or self.vel_drag_ff > 1:
+            raise ValueError("est_gain and vel_drag_ff must be <= 1 and mpc_tiltmax_air_deg < 90")
+
+    @property
+    def acc_tilt_limit_m_s2(self) -> float:
+        """The tilt limit's g·tan(MPC_TILTMAX_AIR): PX4's only horizontal limit on offboard setpoints."""
+        return GRAVITY_M_S2 * math.tan(math.radians(self.mpc_tiltmax_air_deg))
 
     @property
     def acc_hor_limit_m_s2(self) -> float:
-        """Horizontal acceleration limit: MPC_ACC_HOR_MAX, and the tilt limit's g·tan(tilt)."""
-        return min(self.mpc_acc_hor_max_m_s2,
-                   GRAVITY_M_S2 * math.tan(math.radians(self.mpc_tiltmax_air_deg)))
+        """Horizontal acceleration limit of the automatic modes: MPC_ACC_HOR_MAX within the tilt limit."""
+        return min(self.mpc_acc_hor_max_m_s2, self.acc_tilt_limit_m_s2)

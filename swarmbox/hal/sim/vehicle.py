@@ -17,7 +17,7 @@ from typing import Any, Protocol
 from swarmbox.api import FlightMode, Setpoint, SetpointKind, SetpointVerdict, Telemetry
 from swarmbox.hal.safety import SafetyLimits, check_setpoint
 from swarmbox.hal.sim.control import CascadedController
-from swarmbox.hal.sim.params import SimParams
+from swarmbox.hal.sim.params import GRAVITY_M_S2, SimParams
 
 Vec3 = tuple[float, float, float]
 _AUTO = (FlightMode.TAKEOFF, FlightMode.LAND, FlightMode.RTL)
@@ -103,6 +103,7 @@ class SimVehicle:
             return
         self.armed, self._arm_t_s, self._been_airborne = True, self._fleet.t_s, False
         self._ctrl.reset_integrator(self.drone_id)
+        self._ramp_takeoff(self._arm_t_s)
         self._set_mode(FlightMode.IDLE)
         self._fleet.supervise(self.drone_id)
 
@@ -202,6 +203,7 @@ class SimVehicle:
         """Advance the automatic modes; returns whether to keep supervising."""
         if not self.armed or self.frozen is not None:
             return False
+        ramping = self._ramp_takeoff(t_s)
         landed = self._landed()
         if not self._been_airborne:
             if not landed:
@@ -222,7 +224,21 @@ class SimVehicle:
             self._rtl_step()
         elif self.mode is FlightMode.LAND or self.mode is FlightMode.RTL:
             self._landing_step(t_s, landed)
-        return self.armed and (self.mode in _AUTO or self._braking or not self._been_airborne)
+        return self.armed and (self.mode in _AUTO or self._braking or not self._been_airborne or ramping)
+
+    def _ramp_takeoff(self, t_s: float) -> bool:
+        """PX4's smooth takeoff: no lift for COM_SPOOLUP_TIME after arming, then the climb-rate
+        limit ramps linearly over MPC_TKO_RAMP_T from -g/MPC_Z_VEL_P_ACC (the value that commands
+        zero thrust) to MPC_Z_VEL_MAX_UP. Returns whether the ramp is still running."""
+        p, i = self._p, self.drone_id
+        since = t_s - self._arm_t_s - p.com_spoolup_time_s
+        if not self.armed or p.mpc_tko_ramp_t_s <= 0 or since >= p.mpc_tko_ramp_t_s:
+            self._ctrl.set_takeoff_ramp(i, math.inf)
+            return False
+        start = -GRAVITY_M_S2 / max(p.mpc_z_vel_p_acc, 1e-6)
+        frac = min(max(since / p.mpc_tko_ramp_t_s, 0.0), 1.0)
+        self._ctrl.set_takeoff_ramp(i, max(start + frac * (p.mpc_z_vel_max_up_m_s - start), 0.0))
+        return True
 
     def _rtl_step(self) -> None:
         p, (n, e, d) = self._p, self._est()
@@ -252,6 +268,7 @@ class SimVehicle:
 
     def _disarm(self, reason: str) -> None:
         self.armed = False
+        self._ctrl.set_takeoff_ramp(self.drone_id, math.inf)
         self._ctrl.set_thrust_off(self.drone_id)
         self._set_mode(FlightMode.IDLE)
         self._fleet.emit(self.drone_id, "command", "disarmed", {"reason": reason})
@@ -260,6 +277,7 @@ class SimVehicle:
         if mode is not self.mode:
             self._noted.clear()
         self.mode, self._last_sp, self._last_ok, self._ground_since_s = mode, None, None, None
+        self._ctrl.set_offboard_limits(self.drone_id, mode is FlightMode.OFFBOARD)
         self._braking = self._braking and mode is FlightMode.HOLD
         if mode in _AUTO or self._braking or (self.armed and not self._been_airborne):
             self._fleet.supervise(self.drone_id)

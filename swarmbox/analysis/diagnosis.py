@@ -46,6 +46,8 @@ from swarmbox.analysis.load import GROUND, RunData
 from swarmbox.analysis.unify import T
 
 DISC = ("disc_n_m", "disc_e_m", "disc_d_m")
+#: estimator events that are baseline alarms (the sim logs position_reset; PX4's ULog all three)
+BASELINE_EVENTS = ("position_reset", "dead_reckoning", "gnss_fusion_lost")
 METRICS = (*DISC, "latency_ms", "loss_ratio")
 MIN_DEVIATION = {"disc_n_m": 1.5, "disc_e_m": 1.5, "disc_d_m": 1.5, "latency_ms": 1.0, "loss_ratio": 0.05}
 RULES = {"tukey": 1.5, "paper": 2.5}
@@ -264,9 +266,10 @@ def finding(alarms: pd.DataFrame) -> dict:
 
 
 def estimator_alarms(run: RunData, span: tuple[float, float]) -> pd.DataFrame:
-    """The per-drone baseline: every estimator position reset inside the span, as an alarm."""
+    """The per-drone baseline: every estimator position reset inside the span, as an alarm (on PX4 also
+    EKF2's own loss markers from its ULog: dead reckoning begins, GNSS fusion stops)."""
     ev = run.tables["events"]
-    resets = ev[(ev["kind"] == "estimator") & (ev["name"] == "position_reset") & ev["node"].isin(run.drones)
+    resets = ev[(ev["kind"] == "estimator") & ev["name"].isin(BASELINE_EVENTS) & ev["node"].isin(run.drones)
                 & (ev[T] >= span[0]) & (ev[T] <= span[1])].sort_values([T, "node"])
     return pd.DataFrame({T: resets[T].to_numpy(dtype="float64"),
                          "drone": resets["node"].astype("int64").to_numpy(),

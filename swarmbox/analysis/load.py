@@ -261,6 +261,9 @@ def load_run(run_dir: str | Path, columns: dict[str, tuple[str, ...]] | None = N
         incomplete = True
         problems.append(f"{partial.relative_to(run_dir)}: writing never finished")
     tables = {t: _concat(t, parts.pop(t), (columns or {}).get(t)) for t in list(parts)}
+    if "events" not in (columns or {}) and any((run_dir / "logs").glob("drone_*/ulog.json")):
+        from swarmbox.analysis.ulog import add_estimator_events  # PX4 runs: EKF2's markers as events
+        tables["events"] = add_estimator_events(run_dir, tables["events"], tables.get("state"))
     return RunData(run_dir, manifest, config, tables, sorted(dirs), problems, incomplete)
 
 

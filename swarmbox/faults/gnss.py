@@ -133,18 +133,31 @@ class GpsNoise(Fault):
 
 
 class GpsDropout(Fault):
-    """No GNSS fixes at all (the estimator coasts on its inertial prediction)."""
+    """No GNSS fixes at all (the estimator coasts on its inertial prediction).
+
+    On an autopilot backend (``px4``, ``mavsim``: ``inject_failure(i, unit, kind)``) the autopilot
+    switches its own receiver off (MAV_CMD_INJECT_FAILURE, GPS, OFF; OK at the end), so its own
+    estimator loses GNSS; its answer is a ``fault/inject_*`` event of that drone.
+    """
 
     name = "gps_dropout"
     Params = GpsDropoutParams
 
     def check(self, env: FaultEnv) -> None:
-        env.require_backend(self.name, ("gnss_available",), "a GNSS availability input")
+        self.autopilot = not hasattr(env.backend, "gnss_available") and hasattr(env.backend, "inject_failure")
+        if not self.autopilot:
+            env.require_backend(self.name, ("gnss_available",), "a GNSS availability input")
 
     def start(self, env: FaultEnv) -> None:
         for drone in self.drones():
-            env.backend.gnss_available[env.index(drone)] = False
+            if self.autopilot:
+                env.backend.inject_failure(env.index(drone), "gps", "off")
+            else:
+                env.backend.gnss_available[env.index(drone)] = False
 
     def stop(self, env: FaultEnv) -> None:
         for drone in self.drones():
-            env.backend.gnss_available[env.index(drone)] = True
+            if self.autopilot:
+                env.backend.inject_failure(env.index(drone), "gps", "ok")
+            else:
+                env.backend.gnss_available[env.index(drone)] = True

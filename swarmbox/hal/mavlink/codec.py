@@ -25,6 +25,7 @@ from typing import Any, NamedTuple
 from pymavlink.dialects.v20 import common as mavlink
 
 from swarmbox.api import FlightMode, Setpoint, SetpointKind
+from swarmbox.hal.mavlink.paramset import param_from_wire, param_to_wire
 from swarmbox.hal.mavlink.signing import signing_timestamp
 
 Vec3 = tuple[float, float, float]
@@ -40,6 +41,7 @@ CMD_LAND = mavlink.MAV_CMD_NAV_LAND                             # 21
 CMD_RTL = mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH                  # 20
 CMD_SET_MESSAGE_INTERVAL = mavlink.MAV_CMD_SET_MESSAGE_INTERVAL  # 511
 CMD_REQUEST_MESSAGE = mavlink.MAV_CMD_REQUEST_MESSAGE           # 512
+CMD_INJECT_FAILURE = mavlink.MAV_CMD_INJECT_FAILURE             # 420
 RESULT_ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 RESULT_TEMPORARILY_REJECTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
 RESULT_DENIED = mavlink.MAV_RESULT_DENIED
@@ -50,7 +52,8 @@ RESULT_NAMES = {v: k[len("MAV_RESULT_"):].lower() for k, v in vars(mavlink).item
                 if k.startswith("MAV_RESULT_") and k != "MAV_RESULT_ENUM_END" and isinstance(v, int)}
 COMMAND_NAMES = {CMD_SET_MODE: "set_mode", CMD_ARM_DISARM: "arm_disarm", CMD_TAKEOFF: "takeoff",
                  CMD_LAND: "land", CMD_RTL: "return_to_launch",
-                 CMD_SET_MESSAGE_INTERVAL: "set_message_interval", CMD_REQUEST_MESSAGE: "request_message"}
+                 CMD_SET_MESSAGE_INTERVAL: "set_message_interval", CMD_REQUEST_MESSAGE: "request_message",
+                 CMD_INJECT_FAILURE: "inject_failure"}
 PREARM_CHECK_BIT = mavlink.MAV_SYS_STATUS_PREARM_CHECK          # SYS_STATUS health: ready to arm
 ARMED_FLAG = mavlink.MAV_MODE_FLAG_SAFETY_ARMED                 # HEARTBEAT base_mode
 CUSTOM_MODE_FLAG = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
@@ -190,6 +193,12 @@ class GroundTruthMsg(NamedTuple):
     alt_m: float
 
 
+class ParamValueMsg(NamedTuple):
+    name: str
+    value: float             # PX4's bytewise encoding undone: an INT32 parameter's integer value
+    param_type: int
+
+
 class CommandLongMsg(NamedTuple):
     target_system: int
     target_component: int
@@ -252,7 +261,10 @@ DECODERS: dict[int, Callable[[Any], Any]] = {
         m.target_system, m.target_component, m.command, m.confirmation,
         (m.param1, m.param2, m.param3, m.param4, m.param5, m.param6, m.param7)),
     MSG["SET_POSITION_TARGET_LOCAL_NED"]: _setpoint,
+    MSG["PARAM_VALUE"]: lambda m: ParamValueMsg(str(m.param_id), param_from_wire(m.param_value, m.param_type),
+                                                int(m.param_type)),
 }
+
 
 
 # ---- framing and decoding -----------------------------------------------------------------------
@@ -370,6 +382,10 @@ class GcsEncoder:
         p = (tuple(float(x) for x in params) + (0.0,) * 7)[:7]
         msg = self._mav.command_long_encode(target[0], target[1], command, confirmation & 0xFF, *p)
         return self._pack(msg)
+
+    def param_set(self, target: tuple[int, int], name: str, value: float, param_type: int) -> bytes:
+        return self._pack(self._mav.param_set_encode(target[0], target[1], name.encode(),
+                                                     param_to_wire(value, param_type), param_type))
 
     def setpoint(self, target: tuple[int, int], time_boot_ms: int, sp: Setpoint) -> bytes:
         """SET_POSITION_TARGET_LOCAL_NED for ``sp`` (already in the vehicle's local frame)."""

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from swarmbox.hal.mavlink.codec import (
+    CMD_INJECT_FAILURE,
     CMD_REQUEST_MESSAGE,
     CMD_SET_MESSAGE_INTERVAL,
     COMMAND_NAMES,
@@ -209,8 +210,8 @@ class Command:
     @property
     def key(self) -> tuple[int, float | None]:
         """What a newer command replaces: the same command, and for per-message commands
-        (intervals, requests) the same message id."""
-        per_message = self.command in (CMD_SET_MESSAGE_INTERVAL, CMD_REQUEST_MESSAGE)
+        (intervals, requests) the same message id; for failure injection, the same failure unit."""
+        per_message = self.command in (CMD_SET_MESSAGE_INTERVAL, CMD_REQUEST_MESSAGE, CMD_INJECT_FAILURE)
         return self.command, self.params[0] if per_message and self.params else None
 
 

@@ -117,7 +117,8 @@ class Px4Backend:
         p, n = self.params, len(homes)
         specs = (self.launcher.connections() if self.launcher is not None
                  else list(p.connections or [f"udpin:127.0.0.1:{14540 + i}" for i in range(n)]))
-        sysids = list(p.system_ids or [i + 1 for i in range(n)])
+        own_ids = getattr(self.launcher, "system_ids", None)
+        sysids = list(p.system_ids or (own_ids() if own_ids else [i + 1 for i in range(n)]))
         if len(specs) != n or len(sysids) != n:
             raise ValueError(f"px4 backend: {n} vehicles but {len(specs)} connections and "
                              f"{len(sysids)} system ids")
@@ -126,13 +127,21 @@ class Px4Backend:
             self._links.append(VehicleLink(spec, sysid, wanted, signing_key=key))
         if self.launcher is not None:
             self.launcher.start([link.endpoint.local_port for link in self._links])
-        cfg = p.link_config()
+        cfg = p.link_config(self._gnss_failure())
         self.vehicles = [Px4Vehicle(i, link, cfg, VehicleFrame(homes[i], self.frame), self.limits,
                                     self._emitter(i)) for i, link in enumerate(self._links)]
         self._wait_for("heard (HEARTBEAT and LOCAL_POSITION_NED)", lambda v: v.has_position,
                        p.connect_timeout_s)
         if p.wait_ready or self.launcher is not None:
             self._wait_for("ready to arm", lambda v: v.telemetry().ready_to_arm, p.ready_timeout_s)
+
+    def _gnss_failure(self) -> str:
+        """``auto``: PX4 SIH (up to Aug 2025) answers no GNSS failure injection; write SIM_GPS_USED there."""
+        mode = self.params.gnss_failure
+        if mode != "auto":
+            return mode
+        sih = isinstance(self.launcher, SitlLauncher) and self.launcher.options.model.startswith("sihsim")
+        return "sim_param" if sih else "inject"
 
     def _emitter(self, i: int) -> Callable[[str, str, dict[str, Any]], None]:
         def emit(kind: str, name: str, data: dict[str, Any]) -> None:
@@ -200,6 +209,11 @@ class Px4Backend:
         except Exception as exc:   # a corrupt log: report it and keep the run's result
             print(f"px4 backend: could not collect the vehicles' logs: {type(exc).__name__}: {exc}",
                   file=sys.stderr)
+
+    def inject_failure(self, i: int, unit: str, kind: str, instance: int = 0) -> None:
+        """Vehicle ``i``'s autopilot fails ``unit`` itself (MAV_CMD_INJECT_FAILURE; ``kind="ok"``
+        ends it). The answer arrives as a ``fault/inject_accepted`` or ``inject_refused`` event."""
+        self.vehicles[i].inject_failure(unit, kind, instance)
 
     # ---- measurements ---------------------------------------------------------------------------
     @property

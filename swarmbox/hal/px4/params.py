@@ -24,6 +24,9 @@ __all__ = ["DEFAULT_RATES_HZ", "BootClock", "LinkConfig", "Px4Params", "boot_clo
 DEFAULT_RATES_HZ = {"LOCAL_POSITION_NED": 30.0, "GLOBAL_POSITION_INT": 10.0, "GPS_RAW_INT": 10.0,
                     "SYS_STATUS": 2.0, "EXTENDED_SYS_STATE": 2.0}
 GROUND_TRUTH_RATE_HZ = 10.0
+#: how a GNSS fault reaches a PX4 autopilot: its failure injection command, or PX4 SIH's
+#: SIM_GPS_USED parameter (no fix); auto: the parameter on SIH SITL this backend launched
+GNSS_FAILURE_MODES = ("auto", "inject", "sim_param")
 
 
 @dataclass(frozen=True, slots=True)
@@ -41,6 +44,7 @@ class LinkConfig:
     silence_unrequested: bool = True
     message_rates_hz: tuple[tuple[str, float], ...] = ()
     signing_key: bytes | None = None      # MAVLink 2 signing of what the bridge sends
+    gnss_failure: str = "inject"          # inject (MAV_CMD_INJECT_FAILURE) | sim_param (SIM_GPS_USED)
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,6 +71,7 @@ class Px4Params:
     ground_truth: bool = False              # request HIL_STATE_QUATERNION (simulators) -> true_pos_ned_m
     stats_every_s: float = 10.0             # a link/stats event per vehicle this often
     signing_key: str | None = None          # MAVLink 2 signing: 64 hex digits or a passphrase; None: off
+    gnss_failure: str = "auto"              # how a GNSS fault reaches the autopilot: inject|sim_param|auto
     speed: float = 1.0                      # simulation speed factor of the vehicles (SITL, mavsim)
     px4_build: str | None = None            # a PX4 build to launch SITL from; "auto": find one; None: connect
     sitl: Mapping[str, Any] = field(default_factory=dict)   # launcher options (swarmbox.hal.px4.sitl)
@@ -106,15 +111,19 @@ class Px4Params:
             raise ValueError(f"px4 backend: command_retries must be an integer >= 0, "
                              f"got {self.command_retries!r}")
         self.signing_bytes()
+        if self.gnss_failure not in GNSS_FAILURE_MODES:
+            raise ValueError(f"px4 backend: gnss_failure must be one of {', '.join(GNSS_FAILURE_MODES)}, "
+                             f"got {self.gnss_failure!r}")
 
-    def link_config(self) -> LinkConfig:
+    def link_config(self, gnss_failure: str = "inject") -> LinkConfig:
+        """The per-vehicle link settings; ``gnss_failure`` resolved by the backend (never ``auto``)."""
         rates = dict(self.message_rates_hz)
         if self.ground_truth:
             rates.setdefault("HIL_STATE_QUATERNION", GROUND_TRUTH_RATE_HZ)
         return LinkConfig(self.component_id, self.link_timeout_s, self.heartbeat_rate_hz,
                           self.setpoint_rate_hz, self.offboard_lead_s, self.command_timeout_s,
                           self.command_retries, self.stats_every_s, self.silence_unrequested,
-                          tuple(rates.items()), self.signing_bytes())
+                          tuple(rates.items()), self.signing_bytes(), gnss_failure)
 
     def signing_bytes(self) -> bytes | None:
         """The 32-byte signing key (None: signing off)."""

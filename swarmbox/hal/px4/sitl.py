@@ -63,6 +63,7 @@ class SitlOptions:
     stop_timeout_s: float = 10.0      # wall s to exit after SIGTERM before SIGKILL
     logger: bool = True               # False: PX4_PARAM_SDLOG_MODE=-1 (no ULog)
     params: Mapping[str, Any] = field(default_factory=dict)   # PX4 parameters, NAME: value
+    first_instance: int = 0           # vehicle i runs as PX4 instance first_instance + i (system id + 1)
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any]) -> SitlOptions:
@@ -71,7 +72,11 @@ class SitlOptions:
             if key not in known:
                 raise TypeError(f"unknown px4 backend sitl option {key!r} "
                                 f"(known: {', '.join(sorted(known))})")
-        return cls(**values)
+        opts = cls(**values)
+        if not isinstance(opts.first_instance, int) or not 0 <= opts.first_instance <= 200:
+            raise ValueError(f"px4 backend sitl.first_instance must be an integer 0-200, "
+                             f"got {opts.first_instance!r}")
+        return opts
 
 
 def find_build(path: str | Path) -> Path:
@@ -142,6 +147,7 @@ def instance_env(home_geo: tuple[float, float, float], options: SitlOptions, spe
         env["PX4_SIM_SPEED_FACTOR"] = f"{speed:g}"
     if not options.logger:
         env["PX4_PARAM_SDLOG_MODE"] = "-1"
+    env["PX4_PARAM_SYS_FAILURE_EN"] = "1"   # MAV_CMD_INJECT_FAILURE answered (simulation only)
     for name, value in options.params.items():
         env[f"PX4_PARAM_{name.upper()}"] = str(value)
     return env
@@ -167,8 +173,15 @@ class SitlLauncher(ProcessSet):
         self._reported: set[int] = set()
         self._stopped = False
 
+    def instance(self, i: int) -> int:
+        """PX4's instance number of vehicle ``i`` (its ports, ``/tmp/px4-sock-<n>``, system id n+1)."""
+        return self.options.first_instance + i
+
     def connections(self) -> list[str]:
-        return [connection_of(i) for i in range(len(self.homes))]
+        return [connection_of(self.instance(i)) for i in range(len(self.homes))]
+
+    def system_ids(self) -> list[int]:
+        return [self.instance(i) + 1 for i in range(len(self.homes))]
 
     def instance_dir(self, i: int) -> Path:
         return self.work_dir / f"instance_{i}"
@@ -179,7 +192,7 @@ class SitlLauncher(ProcessSet):
             wd = self.instance_dir(i)
             wd.mkdir(parents=True, exist_ok=True)
             env = instance_env(self.frame.geodetic_of(home), self.options, self.speed, os.environ)
-            cmd = [str(self.binary), "-i", str(i), "-d", str(self.build / "etc")]
+            cmd = [str(self.binary), "-i", str(self.instance(i)), "-d", str(self.build / "etc")]
             with open(wd / "out.log", "wb") as out, open(wd / "err.log", "wb") as err:
                 self.procs.append(subprocess.Popen(cmd, cwd=wd, env=env, stdin=subprocess.DEVNULL, stdout=out,
                                                    stderr=err, start_new_session=True))

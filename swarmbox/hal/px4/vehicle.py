@@ -24,6 +24,7 @@ from typing import Any
 from swarmbox.api import Setpoint, SetpointVerdict, Telemetry
 from swarmbox.hal.mavlink.codec import (
     CMD_ARM_DISARM,
+    CMD_INJECT_FAILURE,
     CMD_LAND,
     CMD_REQUEST_MESSAGE,
     CMD_RTL,
@@ -46,14 +47,17 @@ from swarmbox.hal.mavlink.codec import (
     HeartbeatMsg,
     LandedStateMsg,
     LocalPositionMsg,
+    ParamValueMsg,
     StatusTextMsg,
     SysStatusMsg,
     flight_mode,
     mode_name,
     px4_main_sub,
 )
+from swarmbox.hal.mavlink.failure import FailureInjector, FailureRequest
 from swarmbox.hal.mavlink.frames import VehicleFrame
 from swarmbox.hal.mavlink.link import Command, CommandTracker, VehicleLink
+from swarmbox.hal.mavlink.paramset import ParamSetter
 from swarmbox.hal.px4.linkreport import LinkReport
 from swarmbox.hal.px4.params import LinkConfig
 from swarmbox.hal.safety import SafetyLimits, check_setpoint
@@ -66,10 +70,10 @@ _ZERO3 = (0.0, 0.0, 0.0)
 WARNING_SEVERITY = 4          # STATUSTEXT at this severity or worse becomes an event
 STATE_GRACE_S = 0.3           # a HEARTBEAT this soon after an accepted command may predate it
 SILENCE_AFTER = 20            # unrequested packets of one id before asking PX4 to stop them
-_NOT_CRITICAL = frozenset((CMD_SET_MESSAGE_INTERVAL, CMD_REQUEST_MESSAGE))
+_NOT_CRITICAL = frozenset((CMD_SET_MESSAGE_INTERVAL, CMD_REQUEST_MESSAGE, CMD_INJECT_FAILURE))
 WANTED = frozenset(MSG[m] for m in (
     "HEARTBEAT", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "GPS_RAW_INT", "SYS_STATUS",
-    "EXTENDED_SYS_STATE", "COMMAND_ACK", "STATUSTEXT", "HIL_STATE_QUATERNION"))
+    "EXTENDED_SYS_STATE", "COMMAND_ACK", "STATUSTEXT", "HIL_STATE_QUATERNION", "PARAM_VALUE"))
 
 
 class Px4Vehicle:
@@ -84,6 +88,12 @@ class Px4Vehicle:
         self._cmds = CommandTracker(self._send_command, self._command_report, cfg.command_timeout_s,
                                     cfg.command_retries, self._command_timed_out, self._command_failed)
         self.failure = ""                          # the latest flight command the autopilot refused
+        self._params = ParamSetter(lambda name, value, kind: self._link.send(self._enc.param_set(
+            self._target, name, value, kind)), cfg.command_timeout_s, cfg.command_retries)
+        self.failures = FailureInjector(
+            lambda cmd: self._cmds.submit(cmd, self._now), emit,
+            lambda name, value, done: self._params.set(name, value, self._now, done),
+            gnss_via_param=cfg.gnss_failure == "sim_param")
         self._on_regain: Command | None = None      # the last command lost with the link
         self._now = 0.0
         self.connected = self.link_lost = False
@@ -109,7 +119,8 @@ class Px4Vehicle:
         self._handlers: dict[type, Callable[[Any], None]] = {
             LocalPositionMsg: self._on_local, GlobalPositionMsg: self._on_global, GnssMsg: self._on_gnss,
             SysStatusMsg: self._on_sys_status, LandedStateMsg: self._on_landed, CommandAckMsg: self._on_ack,
-            StatusTextMsg: self._on_statustext, GroundTruthMsg: self._on_truth}
+            StatusTextMsg: self._on_statustext, GroundTruthMsg: self._on_truth,
+            ParamValueMsg: self._params.on_value}
 
     @property
     def system_id(self) -> int:
@@ -177,6 +188,10 @@ class Px4Vehicle:
         main, sub = px4_main_sub(MODE_HOLD)
         self._submit(CMD_SET_MODE, (CUSTOM_MODE_FLAG, main, sub), lambda: self._set_mode(MODE_HOLD))
 
+    def inject_failure(self, unit: str, kind: str, instance: int = 0) -> None:
+        """Ask the autopilot to fail ``unit`` (``kind="ok"`` ends it): MAV_CMD_INJECT_FAILURE."""
+        self.failures.inject(FailureRequest(unit, kind, instance))
+
     # ---- servicing (called by the backend every step) -----------------------------------------
     def service(self, now_s: float) -> None:
         """Read the link, run the watchdog, stream setpoints, retry commands."""
@@ -201,6 +216,7 @@ class Px4Vehicle:
             self._lose_link()
         self._stream()
         self._cmds.service(now_s)
+        self._params.service(now_s)
         if now_s - self._checks_s >= 1.0:
             self._checks_s = now_s
             self._silence_unrequested()
@@ -312,6 +328,8 @@ class Px4Vehicle:
         Not a disarm refused in the air, nor a command lost with the link (resent when it returns)."""
         if (cmd.command in _NOT_CRITICAL or (cmd.command == CMD_ARM_DISARM and cmd.params[:1] == (0.0,))
                 or (self.link_lost and result == "no ack")):
+            if cmd.command == CMD_INJECT_FAILURE:
+                self.failures.on_failed(cmd, result)
             return
         self.failure = f"autopilot refused {cmd.name} ({result} after {cmd.tries} tries)"
         self._emit("failure", "command_failed", {"command": cmd.name, "result": result, "tries": cmd.tries,

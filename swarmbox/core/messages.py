@@ -17,6 +17,9 @@ GROUND_ID = -1
 NET_ID = -2
 #: The ``subject`` of an event that is about no node in particular.
 NO_SUBJECT = -3
+#: The ``dst`` of the one ``send`` row logged for a Heartbeat published to its subscribers; the row's
+#: ``reason`` lists the destinations (see :func:`broadcast_dsts`).
+BROADCAST = -4
 
 # Encoded sizes (bytes) of a compact binary encoding: header = msg_id u64, t_sent f64, src i16,
 # dst i16, type u8.
@@ -32,6 +35,11 @@ TASK_CODE_MAX = 2**32 - 1
 def task_code_nbytes(code: int) -> int:
     """Wire bytes of a task code (1 below 128, 2 below 16384, ...)."""
     return 1 if code < 0x80 else (code.bit_length() + 6) // 7
+
+
+def broadcast_dsts(dsts: tuple[int, ...] | list[int]) -> str:
+    """The ``reason`` text of a broadcast ``send`` row: its destination ids, comma-separated."""
+    return ",".join(map(str, dsts))
 
 
 def make_msg_id(src: int, seq: int) -> int:

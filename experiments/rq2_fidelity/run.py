@@ -90,13 +90,17 @@ def _cpu_s() -> float:
 # ---- the experiment --------------------------------------------------------------------------------
 def swarm_traffic_kb_s(run_dir: Path, sim_time_s: float) -> float:
     """Mean bytes the drone nodes send per second of mission time, per agent (KB/s)."""
-    import pandas as pd
+    import pyarrow.compute as pc
+    import pyarrow.parquet as pq
+
+    from swarmbox.record.broadcast import expand_broadcasts
 
     total = 0
     for i in DRONES:
         path = run_dir / "logs" / f"drone_{i}" / "messages.parquet"
-        msgs = pd.read_parquet(path, columns=["kind", "nbytes"])
-        total += int(msgs.loc[msgs["kind"] == "send", "nbytes"].sum())
+        # one row per destination, whichever schema version wrote the file
+        msgs = expand_broadcasts(pq.read_table(path, columns=["kind", "dst", "reason", "nbytes"]))
+        total += int(pc.sum(msgs.filter(pc.equal(msgs["kind"], "send"))["nbytes"]).as_py() or 0)
     return total / len(DRONES) / sim_time_s / 1e3
 
 

@@ -28,7 +28,8 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import yaml
 
-from swarmbox.record.schema import SCHEMA_VERSION, TABLES
+from swarmbox.record.broadcast import expand_broadcasts
+from swarmbox.record.schema import READABLE_VERSIONS, SCHEMA_VERSION, TABLES
 
 GROUND = -1
 NET = -2
@@ -147,7 +148,10 @@ def read_arrow(path: Path, table: str, node: int, problems: list[str],
         pf = pq.ParquetFile(path)
         present = set(pf.schema_arrow.names)
         wanted = [c for c in TABLES[table] if columns is None or c.name in columns]
-        data = pf.read(columns=[c.name for c in wanted if c.name in present])
+        names = [c.name for c in wanted if c.name in present]
+        if table == "messages":   # broadcast rows expand to one per destination (see below)
+            names += [c for c in ("dst", "reason") if c in present and c not in names]
+        data = pf.read(columns=names)
     except FileNotFoundError:
         return None
     except Exception as exc:  # noqa: BLE001 - pyarrow raises many types for a corrupt file
@@ -155,8 +159,10 @@ def read_arrow(path: Path, table: str, node: int, problems: list[str],
         return None
     meta = pf.schema_arrow.metadata or {}
     version = meta.get(b"swarmbox.schema", SCHEMA_VERSION.encode()).decode()
-    if version != SCHEMA_VERSION:
-        problems.append(f"{where}: schema version {version}, analyzer reads {SCHEMA_VERSION}")
+    if version not in READABLE_VERSIONS:
+        problems.append(f"{where}: schema version {version}, analyzer reads {', '.join(READABLE_VERSIONS)}")
+    if table == "messages":   # version 2's one row per broadcast, as version 1's one per destination
+        data = expand_broadcasts(data)
     arrays, fields = [], []
     for col in wanted:
         typ = _ARROW[col.dtype]

@@ -7,6 +7,7 @@ node, a message tuple, a backend object or ground truth.
 from __future__ import annotations
 
 import math
+import operator
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any, final
 
@@ -85,11 +86,24 @@ class _Context:
         Reliable tasks (the default) are acknowledged and re-sent until they are, and reach the
         receiver's ``on_task`` exactly once and in send order, whatever the network loses or
         reorders; pass ``reliable=False`` for streams re-sent every tick (best effort: a lost one is
-        gone, a late one may overtake nothing but is not held back either).
+        gone, a late one may overtake nothing but is not held back either). ``code`` is any
+        integer in 0..2**32-1 (codes below 128 take one byte on the wire); anything else is a
+        ValueError here, in every runtime, rather than a frame the network cannot carry.
         """
+        code = _task_code(code)
         wp = None if waypoint_ned_m is None else tuple(float(x) for x in waypoint_ned_m)
         self._node.send_task(dst, code, wp, None if yaw_rad is None else float(yaw_rad), data,
                              reliable)
+
+
+def _task_code(code: Any) -> int:
+    try:
+        value = operator.index(code)
+    except TypeError:
+        value = None
+    if value is None or isinstance(code, bool) or not 0 <= value <= 2**32 - 1:
+        raise ValueError(f"task code must be an integer in 0..{2**32 - 1}, got {code!r}")
+    return value
 
 
 @final

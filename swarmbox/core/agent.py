@@ -8,11 +8,14 @@ vehicle) -> Heartbeat and Report out -> task retries -> state row.
 
 from __future__ import annotations
 
+from functools import partial
+
 from swarmbox.api import (
     DescendantState,
     DroneAlgorithm,
     DroneContext,
     DroneState,
+    FlightMode,
     PeerState,
     Setpoint,
     SetpointKind,
@@ -21,14 +24,19 @@ from swarmbox.api import (
     Telemetry,
 )
 from swarmbox.core.delivery import Window
-from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck, TaskCommand
-from swarmbox.core.node import STAGE_OF, Node, call_hook
+from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck, TaskCommand, make_msg_id
+from swarmbox.core.node import STAGE_OF, Node, call_hook, hook_error
 from swarmbox.core.stages import TERMINAL, Stage, path_to
 
 _KIND_NAMES = {SetpointKind.POSITION: "position", SetpointKind.VELOCITY: "velocity",
                SetpointKind.ACCELERATION: "acceleration"}
 _LOOP_HOOK = {Stage.PREPARATION: "prep_loop/prep_complete", Stage.EXECUTION: "exec_loop/exec_complete"}
+#: Mode text by mode (``FlightMode.value`` is a Python-level property; a dict lookup is not).
+_MODE_TEXT = {m: m.value for m in FlightMode}
 _NAN = float("nan")
+_new_state = partial(tuple.__new__, DroneState)
+_new_report = partial(tuple.__new__, Report)   # Report(*all 13 fields), built in C
+_new_peer = partial(tuple.__new__, PeerState)
 _NAN3 = (_NAN, _NAN, _NAN)
 _OK = SetpointVerdict("ok")
 
@@ -56,6 +64,10 @@ class AgentNode(Node):
         self._window = Window(t.task_retry_ticks * (t.task_max_retries + 2))
         self._gnss_seq = -1
         self._exec_done = False
+        self._window_busy = False   # a stage change may release held tasks: drain even without mail
+        self._state_every = t.state_every_ticks
+        self.own_state_rows = True   # False: a fleet-wide log writes this drone's state rows
+        self._msg_id_base = make_msg_id(node_id, 0)
         self._log_state = kw["log"].appender("state")
         self._log_setpoint = kw["log"].appender("setpoints")
         self.net.subscribe(node_id, superior)
@@ -68,14 +80,17 @@ class AgentNode(Node):
         if not tel.link_ok and self.stage not in TERMINAL:
             self.event("failsafe", "vehicle_link_lost", self.node_id, action="return_to_launch")
             self.enter(Stage.ABORT, "link to the autopilot lost", failsafe=True)
-        self._drain_inbox()
-        if self.stage not in TERMINAL:
+        if self.inbox or self._window_busy or self.proximity:
+            self._drain_inbox()
+        if self._heard_superior and self.stage not in TERMINAL:
             self._watch_superior()
-        self.age_inferiors()
+        if self.inferiors:
+            self.age_inferiors()
         self.complete = self._stage_work(tel)
         self._publish(tel)
-        self.retry_tasks()
-        if self.time.tick % self.timing.state_every_ticks == 0:
+        if self.outbox.pending:
+            self.retry_tasks()
+        if self.own_state_rows and self.time.tick % self._state_every == 0:
             self._record_state(tel)
         if self.stage in TERMINAL and (not tel.armed or self.stage_timed_out()):
             self.finished = True
@@ -83,21 +98,27 @@ class AgentNode(Node):
     def own_state(self) -> DroneState:
         """This tick's telemetry without ground truth (built once, on first use)."""
         if self._own is None:
-            self._own = DroneState.of(self.telemetry)
+            tel = self.telemetry   # DroneState.of(tel), without the Python-level NamedTuple constructor
+            self._own = _new_state((*tel[:11], tel.link_ok))
         return self._own
 
     def _drain_inbox(self) -> None:
         inbox = self.inbox
+        now = None
         for msg in inbox:
             kind = type(msg)
             if kind is Heartbeat:
                 if msg.src == self.superior:
                     self._sup_silent, self._heard_superior = 0, True
                     self._successor_list = msg.successors
-                    self._follow(STAGE_OF[msg.stage])
+                    commanded = STAGE_OF[msg.stage]
+                    if commanded is not self.stage:
+                        self._follow(commanded)
                 else:
-                    self.peer_view[msg.src] = PeerState(msg.src, STAGE_OF[msg.stage], msg.pos_ned_m,
-                                                        msg.vel_ned_m_s, self.clock.now())
+                    if now is None:
+                        now = self.clock.now()
+                    self.peer_view[msg.src] = _new_peer((msg.src, STAGE_OF[msg.stage], msg.pos_ned_m,
+                                                         msg.vel_ned_m_s, now))
             elif kind is Report:
                 if self.on_report(msg):
                     call_hook(self, "on_report", self.algorithm.on_report, self.ctx,
@@ -109,8 +130,10 @@ class AgentNode(Node):
             elif kind is ProxAlert:
                 self._on_prox_alert(msg)
         inbox.clear()
-        for src in self._window.holding():   # a stage change may have released held tasks
-            self._deliver_ready(src)
+        if self._window_busy:
+            for src in self._window.holding():   # a stage change may have released held tasks
+                self._deliver_ready(src)
+            self._window_busy = bool(self._window.holding())
         if self.proximity and self.time.tick - self._prox_tick > self.timing.lost_inferior_ticks:
             self.proximity = ()   # the ground's all-clear was lost, or the ground fell silent
 
@@ -129,6 +152,7 @@ class AgentNode(Node):
                       cmd.src)
         if self._window.accept(cmd, self.time.tick):
             self._deliver_ready(cmd.src)
+            self._window_busy = True
 
     def _deliver_ready(self, src: int) -> None:
         for cmd in self._window.release(src, int(self.stage), self.time.tick):
@@ -179,9 +203,20 @@ class AgentNode(Node):
             if (stage is Stage.EXECUTION and not tel.armed
                     and self.stage_tick % self.timing.arm_retry_ticks == 0):
                 self.vehicle.arm()
-            complete, sp = call_hook(self, _LOOP_HOOK[stage], self.algorithm.run_stage, stage, self.ctx)
+            try:   # call_hook, inlined: this runs once per drone and tick
+                result = self.algorithm.run_stage(stage, self.ctx)
+            except Exception as exc:  # the user's code may raise anything
+                raise hook_error(self, _LOOP_HOOK[stage], exc) from exc
+            complete, sp = result
             if sp is not None:
-                self._fly(sp)
+                if type(sp) is not Setpoint:
+                    raise TypeError(f"drone {self.node_id}: exec_loop returned {type(sp).__name__}, "
+                                    "expected Setpoint or None")
+                verdict = self.vehicle.setpoint(sp) or _OK
+                n, e, d = sp.ned
+                yaw = sp.yaw_rad
+                self._log_setpoint((self.clock.now(), self.time.tick, _KIND_NAMES[sp.kind], n, e, d,
+                                    _NAN if yaw is None else yaw, verdict.action, verdict.reason))
             if stage is Stage.EXECUTION and complete != self._exec_done:
                 self._exec_done = complete
                 self.event("progress", "exec_complete" if complete else "exec_incomplete", self.node_id)
@@ -190,15 +225,6 @@ class AgentNode(Node):
             return tel.landed and not tel.armed  # touched down and disarmed by the autopilot
 
         return True  # ICEBREAK, TERMINATION
-
-    def _fly(self, sp: Setpoint) -> None:
-        if type(sp) is not Setpoint:
-            raise TypeError(f"drone {self.node_id}: exec_loop returned {type(sp).__name__}, "
-                            "expected Setpoint or None")
-        verdict = self.vehicle.setpoint(sp) or _OK
-        n, e, d = sp.ned
-        self._log_setpoint((self.clock.now(), self.time.tick, _KIND_NAMES[sp.kind], n, e, d,
-                            _NAN if sp.yaw_rad is None else sp.yaw_rad, verdict.action, verdict.reason))
 
     # -- superior watchdog ----------------------------------------------------------------------
     def _watch_superior(self) -> None:
@@ -236,25 +262,33 @@ class AgentNode(Node):
     # -- outgoing -------------------------------------------------------------------------------
     def _publish(self, tel: Telemetry) -> None:
         node_id, net = self.node_id, self.net
+        now = self.clock.now()
         if net.has_subscribers(node_id):
             succ = tuple(call_hook(self, "successors", self.algorithm.successors, self.ctx))
-            net.publish(Heartbeat(self.next_msg_id(), self.clock.now(), node_id, int(self.stage), succ,
+            net.publish(Heartbeat(self.next_msg_id(), now, node_id, int(self.stage), succ,
                                   tel.pos_ned_m, tel.vel_ned_m_s))
-        total, alive = self.head_count()
         disc = None
         if tel.gnss_seq != self._gnss_seq and tel.gnss_ned_m is not None:
             self._gnss_seq = tel.gnss_seq
             g, p = tel.gnss_ned_m, tel.pos_ned_m
             disc = (g[0] - p[0], g[1] - p[1], g[2] - p[2])
-        complete = self.complete and self.inferiors_complete()
-        net.send(Report(self.next_msg_id(), self.clock.now(), node_id, self.superior, int(self.stage),
-                        complete, total + 1, alive + (self.stage is not Stage.ABORT), tel.pos_ned_m,
-                        tel.vel_ned_m_s, disc, self.report_data, self.descendants()), self.superior)
+        stage = self.stage
+        if self.inferiors:
+            total, alive = self.head_count()
+            complete, below = self.complete and self.inferiors_complete(), self.descendants()
+        else:   # a leaf (most drones): nothing below it
+            total = alive = 0
+            complete, below = self.complete, ()
+        self._seq += 1
+        superior = self.superior
+        net.send(_new_report((self._msg_id_base | self._seq, now, node_id, superior, int(stage), complete,
+                              total + 1, alive + (stage is not Stage.ABORT), tel.pos_ned_m, tel.vel_ned_m_s,
+                              disc, self.report_data, below)), superior)
 
     def _record_state(self, tel: Telemetry) -> None:
         p, v = tel.pos_ned_m, tel.vel_ned_m_s
         g = tel.gnss_ned_m or _NAN3
         tp = tel.true_pos_ned_m or _NAN3
         self._log_state((self.clock.now(), self.time.tick, int(self.stage), tel.armed, tel.landed,
-                         tel.mode.value, p[0], p[1], p[2], v[0], v[1], v[2], g[0], g[1], g[2],
+                         _MODE_TEXT[tel.mode], p[0], p[1], p[2], v[0], v[1], v[2], g[0], g[1], g[2],
                          tp[0], tp[1], tp[2], tel.yaw_rad, tel.battery_frac))

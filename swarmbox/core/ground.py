@@ -17,7 +17,7 @@ from typing import Protocol
 
 from swarmbox.api import DescendantState, GroundAlgorithm, GroundContext
 from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck
-from swarmbox.core.node import Node, call_hook
+from swarmbox.core.node import STAGE_OF, Node, call_hook, new_inferior_report
 from swarmbox.core.proximity import DIRECT_PAIRS_UP_TO, Episode, ProximityTracker, kd_tree
 from swarmbox.core.stages import TERMINAL, Stage
 
@@ -44,6 +44,8 @@ class GroundNode(Node):
         self.proximity = ProximityTracker(self.timing.proximity_m, self.timing.proximity_window_s)
         self.prox_pairs: dict[tuple[int, int], float] = {}   # alerted pair -> distance, this tick
         self.observer: GroundObserver | None = None
+        # the base class's on_report does nothing: not calling it saves a call per Report
+        self._wants_reports = type(algorithm).on_report is not GroundAlgorithm.on_report
         if self.mission.swarm_size > DIRECT_PAIRS_UP_TO:
             kd_tree()   # load scipy now, not inside the first timed tick
 
@@ -69,10 +71,18 @@ class GroundNode(Node):
 
     def _drain_inbox(self) -> None:
         inbox = self.inbox
+        now = self.clock.now()   # one reading for the whole inbox: the clock stands still within a tick
+        inferiors, alive, wants = self.inferiors, self._alive, self._wants_reports
         for msg in inbox:
             kind = type(msg)
             if kind is Report:
-                if self.on_report(msg):
+                inf = inferiors.get(msg.src)
+                if inf is not None and inf.alive and not wants:   # Node.on_report's usual case, inline
+                    inf.report, inf.silent_ticks = msg, 0
+                    inf.received += 1
+                    alive[msg.src] = new_inferior_report((msg.src, STAGE_OF[msg.stage], msg.complete,
+                                                           msg.pos_ned_m, msg.vel_ned_m_s, msg.data, now))
+                elif self.on_report(msg, now) and wants:
                     call_hook(self, "on_report", self.algorithm.on_report, self.ctx,
                               self._alive[msg.src])
             elif kind is TaskAck:

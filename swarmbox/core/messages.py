@@ -17,11 +17,29 @@ GROUND_ID = -1
 NET_ID = -2
 #: The ``subject`` of an event that is about no node in particular.
 NO_SUBJECT = -3
+#: The ``dst`` of the one ``send`` row logged for a Heartbeat published to its subscribers; the row's
+#: ``reason`` lists the destinations (see :func:`broadcast_dsts`).
+BROADCAST = -4
 
 # Encoded sizes (bytes) of a compact binary encoding: header = msg_id u64, t_sent f64, src i16,
 # dst i16, type u8.
 _HEADER = 21
 _VEC3 = 12  # three float32
+
+
+#: Task codes travel as an unsigned LEB128 varint: one byte below 128 (every shipped algorithm's
+#: codes), up to five bytes for the largest code.
+TASK_CODE_MAX = 2**32 - 1
+
+
+def task_code_nbytes(code: int) -> int:
+    """Wire bytes of a task code (1 below 128, 2 below 16384, ...)."""
+    return 1 if code < 0x80 else (code.bit_length() + 6) // 7
+
+
+def broadcast_dsts(dsts: tuple[int, ...] | list[int]) -> str:
+    """The ``reason`` text of a broadcast ``send`` row: its destination ids, comma-separated."""
+    return ",".join(map(str, dsts))
 
 
 def make_msg_id(src: int, seq: int) -> int:
@@ -97,7 +115,7 @@ class TaskCommand(NamedTuple):
 
     @property
     def nbytes(self) -> int:
-        return _HEADER + 4 + 1 + 1 + _VEC3 + 4 + 2 + len(self.data) + 1 + 4
+        return _HEADER + 4 + 1 + task_code_nbytes(self.code) + _VEC3 + 4 + 2 + len(self.data) + 1 + 4
 
 
 class TaskAck(NamedTuple):

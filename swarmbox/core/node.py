@@ -7,6 +7,7 @@ import json
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from functools import partial
 from types import MappingProxyType
 from typing import Any, Protocol
 
@@ -22,6 +23,9 @@ Row = tuple
 _ABORT = int(Stage.ABORT)
 #: Stage by code, for building views without an enum call per message.
 STAGE_OF = {int(s): s for s in Stage}
+#: InferiorReport(*fields) without the Python-level NamedTuple constructor (one per Report received).
+new_inferior_report = partial(tuple.__new__, InferiorReport)
+_new_descendant = partial(tuple.__new__, DescendantState)
 
 
 class Transport(Protocol):
@@ -116,23 +120,28 @@ class Node:
         return self.stage_tick * self.tick_s > self.timing.timeouts_s[self.stage.name]
 
     # -- inferiors ------------------------------------------------------------------------------
-    def on_report(self, rep: Report) -> bool:
-        """Store a Report; returns False (and logs) when the sender is not a known drone."""
-        if rep.src not in self.mission.initial_positions:
-            self.event("error", "unknown_drone", rep.src, reason="report from a drone not in the mission")
-            return False
-        inf = self.inferiors.get(rep.src)
+    def on_report(self, rep: Report, now: float | None = None) -> bool:
+        """Store a Report; returns False (and logs) when the sender is not a known drone.
+
+        ``now``: this node's clock reading, when the caller already has it (one per inbox drain).
+        """
+        src = rep.src
+        inf = self.inferiors.get(src)
         if inf is None:
-            self.inferiors[rep.src] = _Inferior(rep)
-            self.event("topology", "inferior_joined", rep.src)
-        else:
+            if src not in self.mission.initial_positions:
+                self.event("error", "unknown_drone", src, reason="report from a drone not in the mission")
+                return False
+            self.inferiors[src] = _Inferior(rep)
+            self.event("topology", "inferior_joined", src)
+        else:   # known, hence in the mission
             if not inf.alive:
                 inf.alive = True
-                self.event("topology", "inferior_rejoined", rep.src)
+                self.event("topology", "inferior_rejoined", src)
             inf.report, inf.silent_ticks = rep, 0
             inf.received += 1
-        self._alive[rep.src] = InferiorReport(rep.src, STAGE_OF[rep.stage], rep.complete, rep.pos_ned_m,
-                                              rep.vel_ned_m_s, rep.data, self.clock.now())
+        self._alive[src] = new_inferior_report((src, STAGE_OF[rep.stage], rep.complete, rep.pos_ned_m,
+                                                 rep.vel_ned_m_s, rep.data,
+                                                 self.clock.now() if now is None else now))
         return True
 
     def age_inferiors(self) -> None:
@@ -172,11 +181,13 @@ class Node:
 
     def descendants(self) -> tuple[DescendantState, ...]:
         out = []
+        append, extend = out.append, out.extend
         for drone_id, inf in self.inferiors.items():
             if inf.alive:
                 rep = inf.report
-                out.append(DescendantState(drone_id, rep.stage, rep.pos_ned_m))
-                out.extend(rep.descendants)
+                append(_new_descendant((drone_id, rep.stage, rep.pos_ned_m)))
+                if rep.descendants:
+                    extend(rep.descendants)
         return tuple(out)
 
     # -- tasks ----------------------------------------------------------------------------------
@@ -214,8 +225,13 @@ def call_hook(node: Node, hook: str, fn: Callable, *args: Any) -> Any:
     try:
         return fn(*args)
     except Exception as exc:  # the user's code may raise anything
-        who = "ground" if node.node_id < 0 else f"drone {node.node_id}"
-        raise AlgorithmError(f"{who}: {hook} raised {type(exc).__name__}: {exc}") from exc
+        raise hook_error(node, hook, exc) from exc
+
+
+def hook_error(node: Node, hook: str, exc: Exception) -> AlgorithmError:
+    """The AlgorithmError for ``exc`` raised by ``hook`` (for hot paths that inline :func:`call_hook`)."""
+    who = "ground" if node.node_id < 0 else f"drone {node.node_id}"
+    return AlgorithmError(f"{who}: {hook} raised {type(exc).__name__}: {exc}")
 
 
 def _jsonable(x: Any) -> Any:

@@ -61,6 +61,9 @@ class Swarm:
         self._order = itertools.count()   # ties run in the order they were scheduled
         self._by_id = {a.node_id: a for a in agents}
         self.end_watch = EndWatch(ground.timing.lost_superior_ticks)   # every drone down or lost
+        #: Writes every agent's state row of a tick as one block (set by the builder when the backend
+        #: exports its fleet arrays; otherwise each agent logs its own row).
+        self.state_log: Callable[[int], None] | None = None
 
     def schedule(self, at_s: float, action: Callable[[Swarm], None]) -> None:
         """Run ``action(swarm)`` at the first tick at or after true time ``at_s``."""
@@ -73,6 +76,8 @@ class Swarm:
         """
         agent = self._by_id[drone_id]
         agent.removed = agent.finished = True
+        if self.state_log is not None:
+            self.state_log.refresh()   # type: ignore[attr-defined]
         self.medium.disconnect(drone_id)
         agent.event("failsafe", "node_removed", drone_id, action="land")
         agent.vehicle.land()
@@ -86,6 +91,8 @@ class Swarm:
         for agent in self.agents:
             if not agent.removed:
                 agent.tick()
+        if self.state_log is not None:
+            self.state_log(t.tick)
         self.backend.step(self.tick_s)
         for ev in self.backend.drain_events():
             log = self._event_logs.get(ev.drone_id)

@@ -22,6 +22,7 @@ import dataclasses
 import typing
 from typing import Any, Optional
 
+from swarmbox.faults.autopilot import GpsFailure
 from swarmbox.faults.base import Fault
 from swarmbox.faults.clock import ClockSkew
 from swarmbox.faults.gnss import GpsBias, GpsDrift, GpsDropout, GpsNoise
@@ -30,7 +31,7 @@ from swarmbox.faults.vehicle import BatteryFailsafe, Crash, MotorLoss
 
 #: Every fault model, by config name.
 MODELS: dict[str, type[Fault]] = {cls.name: cls for cls in (
-    GpsDrift, GpsBias, GpsNoise, GpsDropout,
+    GpsDrift, GpsBias, GpsNoise, GpsDropout, GpsFailure,
     Latency, PacketLoss, BurstLoss, LinkCut, Partition,
     Crash, MotorLoss, BatteryFailsafe,
     ClockSkew,

@@ -1,7 +1,8 @@
 """A compact binary encoding of the swarm messages (what a real link carries).
 
 Little-endian, no padding, no field names: a 21-byte header (type u8, msg_id u64, t_sent_s f64,
-src i16, dst i16) and a fixed body per type, vectors as three float32, stages as signed bytes. An
+src i16, dst i16) and a fixed body per type, vectors as three float32, stages as signed bytes, a
+task's code as an unsigned LEB128 varint (one byte below 128, at most five up to 2**32-1). An
 absent vector or yaw is NaN; variable parts (successors, descendants, neighbours) carry a count
 or fill the frame's tail. The encoded length equals the message's ``nbytes`` for ASCII payload
 strings, so the sizes the logs record are the sizes on the wire.
@@ -10,10 +11,12 @@ strings, so the sizes the logs record are the sizes on the wire.
 from __future__ import annotations
 
 import math
+import operator
 import struct
 
 from swarmbox.core.messages import (
     NO_SUBJECT,
+    TASK_CODE_MAX,
     DescendantState,
     Heartbeat,
     ProxAlert,
@@ -26,7 +29,8 @@ _HEADER = struct.Struct("<BQdhh")
 _VEC = struct.Struct("<3f")
 _HB = struct.Struct("<bB")
 _REPORT = struct.Struct("<b?HH9fH")
-_TASK = struct.Struct("<I?BbI4fH")
+_TASK_HEAD = struct.Struct("<I?")
+_TASK_TAIL = struct.Struct("<bI4fH")
 _ACK = struct.Struct("<I")
 _COUNT = struct.Struct("<H")
 _DESC = struct.Struct("<hb3f")
@@ -37,6 +41,39 @@ _TYPE_CODE = {Heartbeat: 1, Report: 2, TaskCommand: 3, TaskAck: 4, ProxAlert: 5}
 
 class DecodeError(ValueError):
     """A frame that is not a well-formed swarm message."""
+
+
+def check_task_code(code) -> int:
+    """``code`` as an int if it fits the wire field, else a ValueError naming the allowed range."""
+    try:
+        value = operator.index(code)
+    except TypeError:
+        value = None
+    if value is None or isinstance(code, bool) or not 0 <= value <= TASK_CODE_MAX:
+        raise ValueError(f"task code must be an integer in 0..{TASK_CODE_MAX}, got {code!r}")
+    return value
+
+
+def _varint(value: int) -> bytes:
+    out = bytearray()
+    while value >= 0x80:
+        out.append((value & 0x7F) | 0x80)
+        value >>= 7
+    out.append(value)
+    return bytes(out)
+
+
+def _unvarint(buf: bytes, off: int) -> tuple[int, int]:
+    value = shift = 0
+    for i in range(5):
+        byte = buf[off + i]
+        value |= (byte & 0x7F) << shift
+        if not byte & 0x80:
+            if value > TASK_CODE_MAX or (i and not byte):
+                raise DecodeError(f"task code varint {buf[off:off + i + 1].hex()} is out of range or padded")
+            return value, off + i + 1
+        shift += 7
+    raise DecodeError("task code varint longer than 5 bytes")
 
 
 def _vec(v) -> tuple[float, float, float]:
@@ -77,8 +114,8 @@ def encode(msg) -> bytes:
     if code == 3:
         data = msg.data.encode()
         yaw = math.nan if msg.yaw_rad is None else msg.yaw_rad
-        return head + _TASK.pack(msg.seq, msg.reliable, msg.code, msg.stage, msg.floor,
-                                 *_vec(msg.waypoint_ned_m), yaw, len(data)) + data
+        return (head + _TASK_HEAD.pack(msg.seq, msg.reliable) + _varint(check_task_code(msg.code))
+                + _TASK_TAIL.pack(msg.stage, msg.floor, *_vec(msg.waypoint_ned_m), yaw, len(data)) + data)
     if code == 4:
         return head + _ACK.pack(msg.seq)
     return head + _COUNT.pack(len(msg.neighbours)) + _descs(msg.neighbours)
@@ -114,8 +151,10 @@ def _decode(buf: bytes):
         return Report(msg_id, t_sent, src, dst, f[0], f[1], f[2], f[3], tuple(f[4:7]), tuple(f[7:10]),
                       _opt(tuple(f[10:13])), data, _undescs(buf, off, rest // _DESC.size))
     if code == 3:
-        seq, reliable, cmd, stage, floor, wn, we, wd, yaw, n = _TASK.unpack_from(buf, off)
-        off += _TASK.size
+        seq, reliable = _TASK_HEAD.unpack_from(buf, off)
+        cmd, off = _unvarint(buf, off + _TASK_HEAD.size)
+        stage, floor, wn, we, wd, yaw, n = _TASK_TAIL.unpack_from(buf, off)
+        off += _TASK_TAIL.size
         data = buf[off:off + n].decode()
         _exact(buf, off + n)
         return TaskCommand(msg_id, t_sent, src, dst, seq, reliable, cmd, _opt((wn, we, wd)),

@@ -1,10 +1,15 @@
 """An in-process network on the run's clock, with per-link latency, jitter and loss.
 
 Every message is recorded where it happens: a ``send`` row in the sender's log (one per
-destination), a ``recv`` row in the receiver's log stamped with the receiver's clock at the
-*arrival* instant (so latency below one tick is measurable), and a ``drop`` row in the ``net`` log.
+destination; a published Heartbeat gets one row for all its subscribers, ``dst`` =
+:data:`~swarmbox.core.messages.BROADCAST` and the destinations listed in ``reason``), a ``recv``
+row in the receiver's log stamped with the receiver's clock at the *arrival* instant (so latency
+below one tick is measurable), and a ``drop`` row in the ``net`` log.
 A message sent during tick k is handed to its receiver at the first tick at or after its arrival,
 and never earlier than tick k+1. All randomness comes from the generator given at construction.
+
+On an ideal network (no per-link specs, no fault hooks, constant delay, no loss) a published
+Heartbeat travels as one queue item for all its subscribers, and nothing is drawn at random.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmbox.core.clock import NodeClock, TimeSource
-from swarmbox.core.messages import MESSAGE_TYPES
+from swarmbox.core.messages import BROADCAST, MESSAGE_TYPES, broadcast_dsts
 
 Row = tuple
 Append = Callable[[Row], None]
@@ -81,27 +86,33 @@ class SimMedium:
         self._fifo: deque = deque()       # same items, for messages with the default constant delay
         self._seq = 0
         self.hooks: list[LinkHook] = []
+        self._ideal = not (default.jitter_s or default.loss_prob)   # and no links: see _is_ideal
+        self._fanout: dict[int, tuple[tuple[int, ...], str, bool]] = {}   # publisher -> dsts, text, reachable
 
     # -- membership -----------------------------------------------------------------------------
     def register(self, node_id: int, clock: NodeClock, log: Append) -> list:
         """Attach a node; returns its inbox (a list the node drains each tick)."""
         ep = _Endpoint(clock, log)
         self._nodes[node_id] = ep
+        self._fanout.clear()
         return ep.inbox
 
     def disconnect(self, node_id: int) -> None:
         """The node goes silent: nothing it sends leaves, nothing reaches it (e.g. a crash)."""
         self._nodes[node_id].connected = False
+        self._fanout.clear()
 
     def subscribe(self, subscriber: int, publisher: int) -> None:
         subs = self._subscribers.setdefault(publisher, [])
         if subscriber not in subs:
             subs.append(subscriber)
+            self._fanout.pop(publisher, None)
 
     def unsubscribe(self, subscriber: int, publisher: int) -> None:
         subs = self._subscribers.get(publisher, [])
         if subscriber in subs:
             subs.remove(subscriber)
+            self._fanout.pop(publisher, None)
 
     def has_subscribers(self, publisher: int) -> bool:
         return bool(self._subscribers.get(publisher))
@@ -111,9 +122,33 @@ class SimMedium:
 
     # -- traffic --------------------------------------------------------------------------------
     def publish(self, msg) -> None:
-        """Send a Heartbeat to every subscriber of its sender."""
-        for dst in self._subscribers.get(msg.src, ()):
-            self.send(msg, dst)
+        """Send a Heartbeat to every subscriber of its sender: one ``send`` row for all of them."""
+        src = msg.src
+        fan = self._fanout.get(src)
+        if fan is None:
+            fan = self._fan(src)
+        dsts, text, reachable = fan
+        if not dsts:
+            return
+        sender = self._nodes[src]
+        if not sender.connected:
+            return
+        t, tick = self._time.t_s, self._time.tick
+        mtype, nbytes = MESSAGE_TYPES[type(msg)], msg.nbytes
+        sender.log((sender.clock.now(), tick, "send", msg.msg_id, mtype, src, BROADCAST, nbytes, msg.t_sent_s,
+                    text))
+        if reachable and self._ideal and not self._links and not self.hooks:
+            self._fifo.append((t + self._default.latency_s, tick, 0, dsts, msg, mtype, nbytes))
+            return
+        for dst in dsts:
+            self._route(msg, src, dst, t, tick, mtype, nbytes)
+
+    def _fan(self, src: int) -> tuple[tuple[int, ...], str, bool]:
+        dsts = tuple(self._subscribers.get(src, ()))
+        nodes = self._nodes
+        reachable = all(d in nodes and nodes[d].connected for d in dsts)
+        fan = self._fanout[src] = (dsts, broadcast_dsts(dsts), reachable)
+        return fan
 
     def send(self, msg, dst: int) -> None:
         src = msg.src
@@ -123,17 +158,28 @@ class SimMedium:
         t, tick = self._time.t_s, self._time.tick
         mtype, nbytes = MESSAGE_TYPES[type(msg)], msg.nbytes
         sender.log((sender.clock.now(), tick, "send", msg.msg_id, mtype, src, dst, nbytes, msg.t_sent_s, ""))
-        spec = self._links.get((src, dst), self._default) if self._links else self._default
-        delay, reason = spec.impair(self._rng, self.hooks, msg, src, dst, t)
+        if self._ideal and not self._links and not self.hooks:
+            receiver = self._nodes.get(dst)
+            if receiver is not None and receiver.connected:   # ideal and reachable: no draw, FIFO
+                self._fifo.append((t + self._default.latency_s, tick, 0, dst, msg, mtype, nbytes))
+                return
+        self._route(msg, src, dst, t, tick, mtype, nbytes)
+
+    def _route(self, msg, src: int, dst: int, t: float, tick: int, mtype: str, nbytes: int) -> None:
+        """Impair one (message, destination) and queue it, or log its drop."""
+        if self._links or self.hooks or not self._ideal:
+            spec = self._links.get((src, dst), self._default) if self._links else self._default
+            delay, reason = spec.impair(self._rng, self.hooks, msg, src, dst, t)
+        else:
+            delay, reason = self._default.latency_s, ""
         receiver = self._nodes.get(dst)
         if not reason and (receiver is None or not receiver.connected):
             reason = "unreachable"
         if reason:
             self._drop_log((t, tick, "drop", msg.msg_id, mtype, src, dst, nbytes, msg.t_sent_s, reason))
             return
-        item = (t + delay, tick, 0, dst, msg, mtype, nbytes)
         if delay == self._default.latency_s and not self._default.jitter_s:
-            self._fifo.append(item)   # same delay as everything else in the FIFO: arrival order kept
+            self._fifo.append((t + delay, tick, 0, dst, msg, mtype, nbytes))   # arrival order kept
         else:
             self._seq += 1
             heapq.heappush(self._queue, (t + delay, tick, self._seq, dst, msg, mtype, nbytes))
@@ -141,14 +187,37 @@ class SimMedium:
     def deliver_due(self) -> None:
         """Hand every message that has arrived by now (and was sent in an earlier tick) over."""
         t, tick = self._time.t_s + 1e-12, self._time.tick
-        fifo, q = self._fifo, self._queue
+        fifo, q, nodes = self._fifo, self._queue, self._nodes
+        last_ep = last_arrival = local = None   # a run of messages to one node arriving at one instant
         while fifo and fifo[0][0] <= t and fifo[0][1] < tick:
-            self._hand_over(fifo.popleft(), tick)
+            item = fifo.popleft()
+            dst = item[3]
+            ep = nodes[dst] if type(dst) is int else None
+            if ep is not None and ep.connected:   # the common case, inline: one receiver, reachable
+                arrival, _, _, _, msg, mtype, nbytes = item
+                if ep is not last_ep or arrival != last_arrival:   # e.g. every Report to the ground
+                    last_ep, last_arrival, local = ep, arrival, ep.clock.at(arrival)
+                ep.log((local, tick, "recv", msg.msg_id, mtype, msg.src, dst, nbytes, msg.t_sent_s, ""))
+                ep.inbox.append(msg)
+            else:
+                self._hand_over(item, tick)
         while q and q[0][0] <= t and q[0][1] < tick:
             self._hand_over(heapq.heappop(q), tick)
 
     def _hand_over(self, item: tuple, tick: int) -> None:
         arrival, _, _, dst, msg, mtype, nbytes = item
+        if type(dst) is tuple:   # one Heartbeat for all its subscribers (ideal network)
+            nodes = self._nodes
+            for d in dst:
+                ep = nodes[d]
+                if ep.connected:
+                    ep.log((ep.clock.at(arrival), tick, "recv", msg.msg_id, mtype, msg.src, d, nbytes,
+                            msg.t_sent_s, ""))
+                    ep.inbox.append(msg)
+                else:
+                    self._drop_log((arrival, tick, "drop", msg.msg_id, mtype, msg.src, d, nbytes,
+                                    msg.t_sent_s, "unreachable"))
+            return
         ep = self._nodes[dst]
         if not ep.connected:
             self._drop_log((arrival, tick, "drop", msg.msg_id, mtype, msg.src, dst, nbytes, msg.t_sent_s,

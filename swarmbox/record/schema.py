@@ -18,9 +18,13 @@ from typing import NamedTuple
 from swarmbox.core.messages import GROUND_ID, NET_ID, NO_SUBJECT
 
 # The node-id sentinels are the core's (the ids it writes); NO_SUBJECT is re-exported for log readers.
-__all__ = ["NO_SUBJECT", "SCHEMA_VERSION", "TABLES", "Column", "node_name"]
+__all__ = ["NO_SUBJECT", "READABLE_VERSIONS", "SCHEMA_VERSION", "TABLES", "Column", "node_name"]
 
-SCHEMA_VERSION = "1"
+#: 2: a published Heartbeat is one ``send`` row (``dst`` = BROADCAST, destinations in ``reason``)
+#: instead of one per subscriber; :mod:`swarmbox.record.broadcast` expands it back. 1: otherwise same.
+SCHEMA_VERSION = "2"
+#: Versions the readers accept (older ones are converted on load).
+READABLE_VERSIONS = ("1", "2")
 
 
 class Column(NamedTuple):
@@ -60,17 +64,19 @@ TABLES: dict[str, tuple[Column, ...]] = {
         ("yaw_rad", "float64", "rad", ""),
         ("battery_frac", "float64", "", "remaining battery fraction"),
     ),
-    # One row per message sent (per destination), received, or dropped by the network.
+    # One row per message sent (per destination; a published Heartbeat: one row for all its
+    # subscribers), received, or dropped by the network.
     "messages": _cols(
         _T, _TICK,
         ("kind", "string", "", "send | recv | drop"),
         ("msg_id", "int64", "", "run-unique message id"),
         ("type", "string", "", "heartbeat | report | task | ack | prox"),
         ("src", "int16", "", "sender node id (-1 ground)"),
-        ("dst", "int16", "", "destination node id"),
+        ("dst", "int16", "", "destination node id; -4: a Heartbeat to every id listed in reason"),
         ("nbytes", "int32", "B", "encoded size"),
         ("t_sent_s", "float64", "s", "sender's clock at send (as carried by the message)"),
-        ("reason", "string", "", "why dropped, or empty"),
+        ("reason", "string", "", "why dropped; on a dst -4 send row the destination ids "
+                                 "(comma-separated); else empty"),
     ),
     # One row per stage entered.
     "stages": _cols(

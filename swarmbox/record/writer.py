@@ -28,6 +28,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from swarmbox.record.blocks import StateBlocks
 from swarmbox.record.columns import arrow_schema, batch, spill_schema
 from swarmbox.record.schema import node_name
 
@@ -54,12 +55,27 @@ class NodeLog:
 
 
 class _Chunk:
-    """One hand-over of one table: the nodes in order and their rows, concatenated."""
+    """One hand-over of one table: the nodes in order and their rows, concatenated (as tuples, or
+    already as a record batch)."""
 
-    __slots__ = ("table", "nodes", "counts", "rows")
+    __slots__ = ("table", "nodes", "counts", "rows", "data")
 
-    def __init__(self, table: str, nodes: list[int], counts: list[int], rows: list[tuple]) -> None:
+    def __init__(self, table: str, nodes: list[int], counts: list[int], rows: list[tuple],
+                 data: pa.RecordBatch | None = None) -> None:
         self.table, self.nodes, self.counts, self.rows = table, nodes, counts, rows
+        self.data = data
+
+    def batch(self, node: np.ndarray | None = None) -> pa.RecordBatch:
+        """The rows as a record batch; with ``node``, in the spill schema."""
+        if self.data is None:
+            return batch(self.table, self.rows, node)
+        if node is None:
+            return self.data
+        return pa.RecordBatch.from_arrays([*self.data.columns, pa.array(node.astype(np.int16))],
+                                          schema=spill_schema(self.table))
+
+    def __len__(self) -> int:
+        return sum(self.counts)
 
 
 class _SpillWriter(threading.Thread):
@@ -84,14 +100,14 @@ class _SpillWriter(threading.Thread):
 
     def _write(self, chunk: _Chunk) -> None:
         node = np.repeat(np.asarray(chunk.nodes, np.int16), chunk.counts)
-        data = batch(chunk.table, chunk.rows, node)
+        data = chunk.batch(node)
         writer = self.writers.get(chunk.table)
         if writer is None:
             self.root.mkdir(parents=True, exist_ok=True)
             writer = pq.ParquetWriter(self.root / f"{chunk.table}.parquet", spill_schema(chunk.table),
                                       compression="lz4")
             self.writers[chunk.table] = writer
-        writer.write_batch(data, row_group_size=len(chunk.rows))
+        writer.write_batch(data, row_group_size=len(chunk))
         offsets = np.concatenate([[0], np.cumsum(chunk.counts)[:-1]]).tolist()
         self.layout.setdefault(chunk.table, []).append(
             [(n, o, c) for n, o, c in zip(chunk.nodes, offsets, chunk.counts, strict=True)])
@@ -108,12 +124,18 @@ class _SpillWriter(threading.Thread):
 class Recorder:
     """All node logs of one run, under ``<run>/logs/``."""
 
-    def __init__(self, run_dir: Path, flush_rows: int = 500_000, max_chunks: int = 8) -> None:
+    #: Rows buffered before a hand-over. Small enough that a 20 s, 200-drone run already hands most
+    #: of its rows over during the loop, as a long run does: the writer's share of the loop (it holds
+    #: the GIL while it converts) is then the same whatever the run's length.
+    FLUSH_ROWS = 100_000
+
+    def __init__(self, run_dir: Path, flush_rows: int = FLUSH_ROWS, max_chunks: int = 8) -> None:
         self.run_dir = Path(run_dir)
         self.root = self.run_dir / "logs"
         self.flush_rows = flush_rows
         self.logs: dict[int, NodeLog] = {}
         self._spill = _SpillWriter(self.run_dir / ".spill", max_chunks)
+        self._blocks = StateBlocks()
 
     def node(self, node_id: int) -> NodeLog:
         if node_id not in self.logs:
@@ -127,7 +149,11 @@ class Recorder:
             self.flush()
 
     def pending_rows(self) -> int:
-        return sum(log.pending_rows() for log in self.logs.values())
+        return sum(log.pending_rows() for log in self.logs.values()) + self._blocks.rows
+
+    def state_block(self, nodes: np.ndarray, columns: list) -> None:
+        """State rows of many drones at once: ``nodes`` and one array per column (schema order)."""
+        self._blocks.add(nodes, columns)
 
     def flush(self) -> None:
         """Hand every buffered row to the background writer (the tick thread does no encoding)."""
@@ -140,6 +166,9 @@ class Recorder:
 
     def _take(self, table: str) -> _Chunk | None:
         """Empty every node's buffer of ``table`` into one chunk (copies pointers only)."""
+        if table == "state" and self._blocks.rows:
+            nodes, counts, data = self._blocks.take(self.logs)
+            return _Chunk(table, nodes, counts, [], data)
         nodes, counts, flat = [], [], []
         for log in self.logs.values():
             rows = log.rows.get(table)
@@ -189,7 +218,7 @@ def _split(spill: Path, layout: dict[str, list[list[tuple[int, int, int]]]], tai
 
 
 def _buffered(chunk: _Chunk, pieces: dict[int, list[pa.Table]]) -> None:
-    data = pa.Table.from_batches([batch(chunk.table, chunk.rows)])
+    data = pa.Table.from_batches([chunk.batch()])
     offset = 0
     for node, count in zip(chunk.nodes, chunk.counts, strict=True):
         pieces.setdefault(node, []).append(data.slice(offset, count))

@@ -21,6 +21,7 @@ from swarmbox.core.topology import Topology, build
 from swarmbox.faults import install_faults
 from swarmbox.hal.safety import SafetyLimits
 from swarmbox.net.medium import LinkSpec, SimMedium
+from swarmbox.record.fleet import FleetStateLog
 from swarmbox.record.schema import node_name
 from swarmbox.record.writer import Recorder
 from swarmbox.run.mission import Mission
@@ -174,6 +175,8 @@ def build_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> Swarm:
     event_logs = {i: recorder.node(i).appender("events") for i in mission.drone_ids}
     swarm = Swarm(time=time, tick_s=timing.tick_s, ground=ground, agents=agents, medium=medium,
                   backend=backend, event_logs=event_logs)
+    if hasattr(backend, "state_columns") and hasattr(recorder, "state_block"):
+        swarm.state_log = FleetStateLog(agents, backend, recorder, timing.state_every_ticks)
     install_faults(cfg, swarm, mission, backend, lambda stream: rng_for(seed, stream))
     return swarm
 

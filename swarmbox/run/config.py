@@ -104,6 +104,9 @@ class NetConfig:
     ready_timeout_s: float = 120.0  # wall s for every node process to be built and connected
     stop_timeout_s: float = 30.0    # wall s for agents to finish after the ground, then SIGTERM
     start_delay_s: float = 1.0      # wall s between "all ready" and tick 0
+    # backend=mavsim: "agent" (each agent starts its own vehicle process) or "shared" (the launcher
+    # starts one mavsim host with every vehicle; agents connect to theirs as to a running autopilot)
+    vehicle_host: str = "agent"
 
 
 @dataclass

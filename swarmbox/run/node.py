@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import signal
 import sys
@@ -37,7 +38,7 @@ from swarmbox.net.medium import LinkSpec
 from swarmbox.net.zenoh_medium import ZenohMedium
 from swarmbox.record.schema import node_name
 from swarmbox.record.writer import Recorder
-from swarmbox.run import build, mission, node_faults
+from swarmbox.run import build, mission, node_faults, node_logs
 from swarmbox.run.params import typed_params
 from swarmbox.run.runner import write_atomic
 
@@ -107,6 +108,9 @@ class NodeProcess:
             default=LinkSpec(n.latency_ms / 1e3, n.jitter_ms / 1e3, n.loss_prob), links=links,
             subscribers=heartbeat_subscribers(dict(topo.superiors), cfg.topology.peers),
             on_reject=self._on_reject)
+        # A restarted node: the logs an earlier process of this node wrote become its first segment
+        self.segments = node_logs.set_aside(run_dir, self.name)
+        self.restarted = False
         # One node per recorder; never flushed mid-run, so the run-wide spill directory stays unused
         self.recorder = Recorder(run_dir)
         self.monitor = ground_monitor(cfg, m.name) if node_id == GROUND_ID else None
@@ -153,13 +157,20 @@ class NodeProcess:
     def wait_start(self, poll_s: float = 0.05) -> bool:
         """Say this node is ready, then wait for the launcher's start instant (False: stopped)."""
         nodes = self.run_dir / "nodes"
-        (nodes / f"{self.name}.ready").write_text(str(os.getpid()))
         start = nodes / "start.json"
+        self.restarted = start.exists()        # the run is under way: this process restarts the node
+        write_atomic(nodes / f"{self.name}.ready", str(os.getpid()))
         while not start.exists():
             if self.stop_requested:
                 return False
             wall.sleep(poll_s)
         self.epoch = float(json.loads(start.read_text())["epoch_wall_s"])
+        if self.restarted:   # join at the tick now due, not at tick 0 (no burst of catch-up ticks)
+            now_s = (wall.time() - self.epoch) * self.speed
+            self.time.tick = max(0, math.ceil(now_s / self.timing.tick_s))
+            self.time.t_s = now_s
+            self.node.event("topology", "process_restarted", self.node_id, tick=self.time.tick,
+                            earlier_segments=len(self.segments))
         return True
 
     def run(self) -> dict[str, Any]:
@@ -195,7 +206,7 @@ class NodeProcess:
         else:
             status, reason = "ok", ""
         out = {"node": self.name, "status": status, "reason": reason, "stage": node.stage.name,
-               "ticks": self.time.tick, "sim_time_s": self.time.t_s}
+               "ticks": self.time.tick, "sim_time_s": self.time.t_s, "restarted": self.restarted}
         if self.node_id == GROUND_ID:
             out["lost_drones"] = sorted(i for i, inf in node.inferiors.items() if not inf.alive)
         return out
@@ -216,6 +227,7 @@ class NodeProcess:
         finally:
             self.medium.close()
             self.recorder.close()
+            node_logs.append_segments(self.run_dir, self.name, self.segments)
             write_atomic(self.run_dir / "nodes" / f"{self.name}.json",
                          json.dumps(result, indent=2, sort_keys=True))
 

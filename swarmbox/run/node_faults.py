@@ -3,9 +3,11 @@
 A network fault (latency, loss, burst loss, partition, link cut) installs its hook in every
 process's medium, which applies it at the receiver to each (message, destination) once, as the
 simulated medium does at the sender. A clock fault skews the clock of the process that owns the
-target node; the other processes leave it alone. Faults on vehicles and GNSS act on the backend of
-a whole fleet and are refused here with a message that says so. Fault start/end events are logged
-by the ground process only, as in a single-process run.
+target node; the other processes leave it alone. A GNSS fault the autopilot applies to itself
+(``gps_dropout``, ``gps_failure``: MAV_CMD_INJECT_FAILURE) is sent by the agent process that owns
+the target's vehicle, to that vehicle only. The other vehicle and GNSS faults write a whole
+fleet's backend inputs and are refused here with a message that says so. Fault start/end events
+are logged by the ground process only, as in a single-process run.
 """
 
 from __future__ import annotations
@@ -23,7 +25,21 @@ from swarmbox.faults.install import selected
 
 #: Fault models a node process can apply (the others act on a whole fleet's backend).
 DISTRIBUTED_FAULTS = frozenset({"latency", "packet_loss", "burst_loss", "partition", "link_cut",
-                                "clock_skew"})
+                                "clock_skew", "gps_dropout", "gps_failure"})
+#: ... of which these act on the vehicle, through its autopilot
+AUTOPILOT_FAULTS = frozenset({"gps_dropout", "gps_failure"})
+
+
+class OwnVehicle:
+    """The fault view of this process's backend: fleet index ``own`` is its one vehicle (index 0);
+    failures of vehicles other processes own are theirs to send. The ground owns none."""
+
+    def __init__(self, backend: Any, own: int | None) -> None:
+        self._backend, self._own = backend, own
+
+    def inject_failure(self, i: int, unit: str, kind: str, instance: int = 0) -> None:
+        if i == self._own:
+            self._backend.inject_failure(0, unit, kind, instance)
 
 
 class _Untouched:
@@ -79,5 +95,12 @@ def check(cfg: DictConfig) -> set[str]:
 def install(cfg: DictConfig, swarm: LocalSwarm, mission: Any, backend: Any,
             rng_for: Callable[[str], Any]) -> None:
     """Install ``cfg.fault`` on this process's node."""
-    if check(cfg):
+    names = check(cfg)
+    if names:
+        if names & AUTOPILOT_FAULTS:
+            own = next((k for k, a in enumerate(swarm.agents) if not isinstance(a, _Remote)), None)
+            if own is not None and not hasattr(backend, "inject_failure"):
+                raise FaultConfigError(f"fault {'+'.join(sorted(names & AUTOPILOT_FAULTS))} with "
+                                       "run.runtime=processes needs an autopilot backend (mavsim, px4)")
+            backend = OwnVehicle(backend, own)
         install_faults(cfg, swarm, mission, backend, rng_for)

@@ -29,7 +29,7 @@ from omegaconf import DictConfig, OmegaConf
 from swarmbox import monitor
 from swarmbox.core.messages import GROUND_ID
 from swarmbox.record.schema import SCHEMA_VERSION, node_name
-from swarmbox.run import build, mission, node_faults
+from swarmbox.run import build, mission, node_faults, vehicle_host
 
 _PACKAGE_ROOT = Path(__file__).resolve().parents[2]
 #: The MAVLink 2 signing key of the vehicle links (``backend.signing_key``), handed to agent processes.
@@ -55,6 +55,14 @@ def free_ports(n: int) -> list[int]:
     finally:
         for s in socks:
             s.close()
+
+
+def child_env() -> dict[str, str]:
+    """The environment of a process the launcher starts: this package first, no inherited keys."""
+    env = dict(os.environ)
+    env.pop(MAVLINK_KEY_ENV, None)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(_PACKAGE_ROOT), env.get("PYTHONPATH")]))
+    return env
 
 
 def _tail(path: Path) -> str:
@@ -88,6 +96,26 @@ def autopilots(cfg: DictConfig, m: Any, run_dir: Path) -> tuple[Any, dict[str, d
                   for k, i in enumerate(m.drone_ids)}
 
 
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:   # a zombie (ended, not yet reaped by its parent) is not alive
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False
+
+
+def _signal(pid: int, sig: signal.Signals) -> None:
+    try:
+        os.kill(pid, sig)
+    except ProcessLookupError:
+        pass
+
+
 class NodeSet:
     """The node processes of one run."""
 
@@ -96,6 +124,7 @@ class NodeSet:
         self.nodes_dir = run_dir / "nodes"
         self.ids = [GROUND_ID, *drone_ids]
         self.procs: dict[int, subprocess.Popen[bytes]] = {}
+        self.restarts: dict[int, int] = {}   # node -> pid of a process started again by someone else
         from swarmbox.run.runner import _in_sweep
 
         # the live dashboard draws from the ground process: it gets this process's terminal (stderr)
@@ -107,10 +136,8 @@ class NodeSet:
         locators = {node_name(i): f"tcp/127.0.0.1:{p}" for i, p in zip(self.ids, ports, strict=True)}
         plan = {"mission_id": secrets.token_hex(6), "locators": locators, "vehicles": vehicles}
         (self.nodes_dir / "plan.json").write_text(json.dumps(plan, indent=2))
-        env = dict(os.environ)
-        env.pop(MAVLINK_KEY_ENV, None)
+        env = child_env()
         env.update(secrets_env)
-        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(_PACKAGE_ROOT), env.get("PYTHONPATH")]))
         for i in self.ids:
             role = ["ground"] if i == GROUND_ID else ["agent", "--drone", str(i)]
             with open(self.nodes_dir / f"{node_name(i)}.log", "wb") as out:
@@ -145,14 +172,36 @@ class NodeSet:
         os.replace(tmp, self.nodes_dir / "start.json")
         return epoch
 
+    def adopt_restarts(self) -> None:
+        """Note node processes started again (by hand or a supervisor) after theirs ended.
+
+        A restarted node writes its own pid to ``nodes/<node>.ready``; the launcher then waits for
+        it at the end as for its own children, and stops it the same way.
+        """
+        for i, p in self.procs.items():
+            if p.poll() is None:
+                continue
+            try:
+                pid = int((self.nodes_dir / f"{node_name(i)}.ready").read_text())
+            except (OSError, ValueError):
+                continue
+            if pid != p.pid and _alive(pid):
+                self.restarts[i] = pid
+
+    def _running(self) -> bool:
+        self.adopt_restarts()
+        return (any(p.poll() is None for p in self.procs.values())
+                or any(_alive(pid) for pid in self.restarts.values()))
+
     def wait_ground(self) -> None:
         ground = self.procs[GROUND_ID]
         while ground.poll() is None:
+            self.adopt_restarts()
             wall.sleep(POLL_S)
 
     def finish_agents(self, timeout_s: float) -> None:
         deadline = wall.monotonic() + timeout_s
-        while any(p.poll() is None for p in self.procs.values()) and wall.monotonic() < deadline:
+        while self._running() and wall.monotonic() < deadline:
             wall.sleep(POLL_S)
         self.stop()
 
@@ -161,6 +210,8 @@ class NodeSet:
         for p in self.procs.values():
             if p.poll() is None:
                 p.send_signal(signal.SIGTERM)
+        for pid in self.restarts.values():
+            _signal(pid, signal.SIGTERM)
         deadline = wall.monotonic() + grace_s
         for p in self.procs.values():
             try:
@@ -168,6 +219,10 @@ class NodeSet:
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()
+        for pid in self.restarts.values():
+            while _alive(pid) and wall.monotonic() < deadline:
+                wall.sleep(POLL_S)
+            _signal(pid, signal.SIGKILL)
 
     def results(self) -> dict[str, dict[str, Any]]:
         out = {}
@@ -179,7 +234,11 @@ class NodeSet:
                 res = {"node": name, "status": "failed", "reason": "no outcome written"}
             code = p.returncode
             res["exit_code"] = code
-            if code is not None and code < 0:
+            if i in self.restarts:   # the outcome is the restarted process's; the first one's exit stays
+                killed = code is not None and code < 0
+                res["first_exit"] = (f"killed by {signal.Signals(-code).name}" if killed
+                                     else f"exit code {code}")
+            elif code is not None and code < 0:
                 res.update(status="killed", reason=f"killed by {signal.Signals(-code).name}")
             out[name] = res
         return out
@@ -197,6 +256,8 @@ def outcome(results: dict[str, dict[str, Any]]) -> tuple[str, str]:
     for name, r in results.items():
         if name != node_name(GROUND_ID) and r["status"] in ("killed", "failed"):
             parts.append(f"{name} {r['status']}: {r['reason']}")
+        elif r.get("first_exit"):
+            parts.append(f"{name} {r['first_exit']}, restarted: {r['status']}")
     return status, "; ".join(p for p in parts if p)
 
 
@@ -236,9 +297,13 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
     try:
         m = mission.load(cfg, build.rng_for(int(cfg.seed), "dataset"))
         node_faults.check(cfg)
+        vehicle_host.check(cfg)
         manifest.update(n_drones=m.swarm_size, nodes=[node_name(i) for i in [GROUND_ID, *m.drone_ids]])
         nodes = NodeSet(cfg, run_dir, list(m.drone_ids))
         sitl, vehicles = autopilots(cfg, m, run_dir)
+        if sitl is None:
+            nodes.nodes_dir.mkdir(parents=True, exist_ok=True)
+            sitl, vehicles = vehicle_host.start(cfg, m, run_dir, child_env())
         nodes.start(secrets_env, vehicles)
         nodes.wait_ready(float(cfg.run.net.ready_timeout_s))
         start = nodes.go(float(cfg.run.net.start_delay_s))
@@ -259,6 +324,8 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
             manifest["node_results"] = manifest["node_results"] or nodes.results()
         if sitl is not None:
             sitl.stop()
+            if getattr(sitl, "stats", None):
+                manifest["vehicle_host"] = sitl.stats
         elapsed = max(wall.time() - start, 1e-9)
         manifest.update(wall_time_s=elapsed, real_time_factor=manifest["sim_time_s"] / elapsed)
         write_atomic(run_dir / "run.json", json.dumps(manifest, indent=2, sort_keys=True))

@@ -7,7 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow.parquet as pq
 
+from swarmbox.record.broadcast import expand_broadcasts
 from tests.conftest import table
 
 #: A 4-drone hover of ~40 s: long enough for fault windows, short enough for the test budget.
@@ -19,8 +21,10 @@ def node_dirs(run_dir: Path) -> list[str]:
 
 
 def messages(run_dir: Path) -> pd.DataFrame:
-    """Every node's messages rows, with the writing node's directory name in ``node``."""
-    parts = [table(run_dir, n, "messages").assign(node=n) for n in node_dirs(run_dir)]
+    """Every node's messages rows (a broadcast as one row per destination), with the writing node's
+    directory name in ``node``."""
+    parts = [expand_broadcasts(pq.read_table(run_dir / "logs" / n / "messages.parquet")).to_pandas()
+             .assign(node=n) for n in node_dirs(run_dir)]
     return pd.concat(parts, ignore_index=True)
 
 

@@ -127,3 +127,29 @@ def test_both_transports_implement_the_medium_interface():
     assert "deliver_due" in methods and "register" in methods
     for cls in (SimMedium, ZenohMedium):
         assert [n for n in methods if not callable(getattr(cls, n, None))] == [], cls.__name__
+
+
+@pytest.mark.parametrize("code, size", [(127, 1), (128, 2), (1000, 2), (16384, 3), (2**32 - 1, 5)])
+def test_task_codes_beyond_one_byte_round_trip_with_their_varint_size(code, size):
+    small = TaskCommand(20, 3.0, -1, 2, 1, True, 7, (1.0, 2.0, 3.0), None, "x", 3, 1)
+    cmd = small._replace(code=code)
+    wire = encode(cmd)
+    assert len(wire) == cmd.nbytes == small.nbytes + size - 1   # codes < 128 keep their old size
+    assert decode(wire) == cmd
+
+
+@pytest.mark.parametrize("code", [-1, 2**32, 1.5, "7", True])
+def test_task_code_outside_the_wire_field_is_a_clear_error(code):
+    cmd = TaskCommand(20, 3.0, -1, 2, 1, True, 0, None, None, "")._replace(code=code)
+    with pytest.raises(ValueError, match=r"task code must be an integer in 0\.\.4294967295"):
+        encode(cmd)
+
+
+def test_overlong_or_padded_task_code_varint_is_malformed():
+    wire = encode(TaskCommand(20, 3.0, -1, 2, 1, True, 5, None, None, ""))
+    at = 21 + 5                                                  # header, seq u32, reliable
+    padded = wire[:at] + bytes([0x85, 0x00]) + wire[at + 1:]     # 5 written in two bytes
+    overlong = wire[:at] + bytes([0xFF] * 5 + [0x01]) + wire[at + 1:]
+    for frame in (padded, overlong):
+        with pytest.raises(DecodeError):
+            decode(frame)

@@ -30,11 +30,16 @@ from swarmbox.run.processes import free_ports
 
 pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parents[2]
+#: the formation, shortened for CI: circle from 5 s of EXECUTION, one lap in ~25 s
+SHORT_FORMATION = ["algo.params.start_s=5", "algo.params.angular_rate_rad_s=0.25",
+                   "algo.params.complete_after_s=32"]
 
 
-def launch(run_dir: Path, *overrides: str) -> subprocess.Popen:
+def launch(run_dir: Path, *overrides: str, key: str | None = None) -> subprocess.Popen:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     env.pop("SWARMBOX_NET_KEY", None)
+    if key:
+        env["SWARMBOX_NET_KEY"] = key
     return subprocess.Popen([sys.executable, "-m", "swarmbox.run", "run.runtime=processes", "backend=mavsim",
                              f"run.out_dir={run_dir}", "run.progress=false", *overrides],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env)
@@ -194,3 +199,44 @@ def test_network_fault_acts_on_the_real_network(tmp_path):
     assert ((lost["src"] == 1) | (lost["dst"] == 1)).all()          # only drone 1's links
     assert lost["t_s"].min() >= 3.0 - 0.1
     assert (events(run_dir, "ground")["name"] == "packet_loss_start").sum() == 1
+
+
+def test_agent_killed_in_execution_restarts_rejoins_and_flies_again(tmp_path):
+    """kill -9 of drone_3 in EXECUTION of the formation, then the same agent started again by hand
+    (same --drone, same run directory): the ground logs ``inferior_rejoined``, the drone arms and
+    climbs again, the run ends ok and its record says what happened."""
+    run_dir, key = tmp_path / "run", os.urandom(16).hex()
+    proc = launch(run_dir, *SHORT_FORMATION, key=key)
+    again = None
+    try:
+        plan = wait_started(run_dir)
+        time.sleep(max(0.0, plan["epoch_wall_s"] + 15.0 - time.time()))
+        os.kill(plan["pids"]["drone_3"], signal.SIGKILL)
+        time.sleep(3.0)
+        restarted_at = time.time() - plan["epoch_wall_s"]
+        env = dict(os.environ, PYTHONPATH=str(ROOT), SWARMBOX_NET_KEY=key)
+        again = subprocess.Popen([sys.executable, "-m", "swarmbox.run.node", "agent", "--drone", "3",
+                                  "--run-dir", str(run_dir)], env=env, stdout=subprocess.PIPE,
+                                 stderr=subprocess.STDOUT)
+        manifest = finish(proc, run_dir)
+        out, _ = again.communicate(timeout=120)
+    finally:
+        proc.kill()
+        if again is not None:
+            again.kill()
+    assert manifest["status"] == "ok", (manifest["reason"], manifest["_console"][-3000:], out[-3000:])
+    assert "drone_3 killed by SIGKILL, restarted: ok" in manifest["reason"]
+    r3 = manifest["node_results"]["drone_3"]
+    assert r3["restarted"] is True and r3["status"] == "ok" and r3["first_exit"] == "killed by SIGKILL"
+    ground = events(run_dir, "ground")
+    lost = ground.query("name == 'inferior_lost' and subject == 3")
+    back = ground.query("name == 'inferior_rejoined' and subject == 3")
+    assert len(lost) == 1 and len(back) == 1 and back["t_s"].iloc[0] > lost["t_s"].iloc[0]
+    state = pd.read_parquet(run_dir / "logs" / "drone_3" / "state.parquet")
+    after = state[state["t_s"] > restarted_at]
+    assert after["armed"].any() and (-after["pos_d"]).max() > 2.0    # it flew again
+    assert state["armed"].iloc[-1] == False  # noqa: E712  (landed with the others)
+    stages = pd.read_parquet(run_dir / "logs" / "drone_3" / "stages.parquet")["name"].tolist()
+    assert "EXECUTION" in stages and stages[-1] == "TERMINATION"
+    assert (events(run_dir, "drone_3")["name"] == "process_restarted").any()
+

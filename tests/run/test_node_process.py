@@ -83,3 +83,41 @@ def test_a_fleet_fault_is_refused_before_any_process_starts(tmp_path):
 def test_keys_given_on_the_command_line_are_not_recorded():
     assert redact(["run.net.key=abc", "+backend.signing_key=pass", "seed=3", "run.net.key_env=X"]) == [
         "run.net.key=***", "+backend.signing_key=***", "seed=3", "run.net.key_env=X"]
+
+
+def test_an_unknown_vehicle_host_is_refused_before_any_process_starts(tmp_path):
+    from swarmbox.run.runner import execute
+    from tests.conftest import compose_config
+
+    cfg, choices = compose_config(["run.runtime=processes", "backend=mavsim", "run.net.vehicle_host=cloud",
+                                   "run.progress=false"])
+    manifest = execute(cfg, tmp_path, choices, [])
+    assert manifest["status"] == "failed"
+    assert "run.net.vehicle_host must be one of agent, shared, got 'cloud'" in manifest["reason"]
+    assert not (tmp_path / "nodes").exists()
+
+
+def test_a_restarted_node_appends_its_rows_after_the_earlier_segments(tmp_path):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from swarmbox.run import node_logs
+
+    logs = tmp_path / "logs" / "drone_3"
+
+    def process_writes(first_t: float) -> None:        # what one process of the node leaves behind
+        logs.mkdir(parents=True, exist_ok=True)
+        pq.write_table(pa.table({"t_s": [first_t, first_t + 1.0], "tick": [1, 2]}), logs / "events.parquet")
+
+    process_writes(0.0)                                 # first process, stopped by SIGTERM
+    segments = node_logs.set_aside(tmp_path, "drone_3")
+    assert len(segments) == 1 and not logs.exists()
+    process_writes(10.0)                                # the restarted process
+    node_logs.append_segments(tmp_path, "drone_3", segments)
+    assert pq.read_table(logs / "events.parquet").column("t_s").to_pylist() == [0.0, 1.0, 10.0, 11.0]
+    segments = node_logs.set_aside(tmp_path, "drone_3")  # restarted once more
+    process_writes(20.0)
+    node_logs.append_segments(tmp_path, "drone_3", segments)
+    times = pq.read_table(logs / "events.parquet").column("t_s").to_pylist()
+    assert times == [0.0, 1.0, 10.0, 11.0, 20.0, 21.0]
+    assert node_logs.set_aside(tmp_path / "elsewhere", "drone_3") == []

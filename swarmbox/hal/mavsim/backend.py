@@ -164,7 +164,9 @@ class MavsimBackend(Px4Backend):
         super().__init__(homes_ned_m=homes_ned_m, tick_s=tick_s, rng=rng, obstacles=obstacles, limits=limits,
                          **params)
 
-    def _make_launcher(self, homes: list[Vec3]) -> MavsimLauncher:
+    def _make_launcher(self, homes: list[Vec3]) -> MavsimLauncher | None:
+        if self.params.connections:   # vehicles that already run (a shared host of a distributed run)
+            return None
         return MavsimLauncher(homes, self.frame, self.params.speed, self._seeds, self.options, self.run_dir)
 
     @property

@@ -21,6 +21,7 @@ from collections.abc import Callable
 from swarmbox.api import FlightMode, Setpoint, Telemetry
 from swarmbox.hal.mavlink.codec import (
     CMD_ARM_DISARM,
+    CMD_INJECT_FAILURE,
     CMD_LAND,
     CMD_RTL,
     CMD_SET_MODE,
@@ -44,6 +45,7 @@ from swarmbox.hal.mavlink.codec import (
     mode_name,
     px4_mode,
 )
+from swarmbox.hal.mavsim.failures import VehicleFailures
 from swarmbox.hal.sim.backend import SimBackend
 
 SEVERITY_CRITICAL, SEVERITY_WARNING, SEVERITY_INFO = 2, 4, 6
@@ -72,7 +74,8 @@ class Commander:
         self._sp_s = -math.inf
         self._handlers: dict[int, Callable[[tuple[float, ...]], int]] = {
             CMD_ARM_DISARM: self._arm_disarm, CMD_SET_MODE: self._set_mode, CMD_TAKEOFF: self._takeoff,
-            CMD_LAND: self._land, CMD_RTL: self._rtl}
+            CMD_LAND: self._land, CMD_RTL: self._rtl, CMD_INJECT_FAILURE: self._inject_failure}
+        self.failures = VehicleFailures(sim)
 
     @property
     def t_s(self) -> float:
@@ -101,6 +104,11 @@ class Commander:
             return RESULT_DENIED
         return RESULT_UNSUPPORTED if handler is None else handler(params)
 
+    def _inject_failure(self, params: tuple[float, ...]) -> int:
+        result, text = self.failures.inject(params)
+        self._text(SEVERITY_WARNING if result == RESULT_ACCEPTED else SEVERITY_INFO, text)
+        return result
+
     # ---- state --------------------------------------------------------------------------------
     def offboard_signal(self) -> bool:
         return self._sp is not None and self.t_s - self._sp_s <= self._loss_s
@@ -121,6 +129,7 @@ class Commander:
     # ---- time ---------------------------------------------------------------------------------
     def step(self, dt_s: float) -> None:
         """Advance the dynamics, then the automatic transitions and the failsafe."""
+        self.failures.step()
         self.sim.step(dt_s)
         for ev in self.sim.drain_events():
             if ev.kind == "command" and ev.name == "disarmed":

@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any, NamedTuple
+from functools import partial
+from itertools import repeat
+from typing import Any
 
 import numpy as np
 
@@ -27,26 +29,14 @@ from swarmbox.hal.vehicle import VehicleEvent
 
 __all__ = ["SimBackend", "SimParams", "SimVehicle"]
 
+_new_telemetry = partial(tuple.__new__, Telemetry)   # Telemetry(*fields), all 13 given
+
 
 def _check_homes(homes_ned_m: Sequence[Sequence[float]]) -> np.ndarray:
     homes = np.array(homes_ned_m, dtype=float)
     if homes.ndim != 2 or homes.shape[1] != 3 or not len(homes) or not np.all(np.isfinite(homes)):
         raise ValueError(f"homes_ned_m must be a non-empty list of finite (n, e, d), got {homes_ned_m!r}")
     return homes
-
-
-class _TelemetryLists(NamedTuple):
-    """The fleet's numeric state as Python lists, built once per step on first demand."""
-
-    pos: list[list[float]]
-    vel: list[list[float]]
-    true_pos: list[list[float]]
-    fix: list[list[float]]
-    seq: list[int]
-    yaw: list[float]
-    landed: list[bool]
-    battery: list[float]
-    ready: list[bool]
 
 
 class SimBackend:
@@ -97,7 +87,7 @@ class SimBackend:
         self._world.read(self._pos, self._vel)
         self._dt_s, self._substeps, self._t0_s, self._k = -1.0, 1, 0.0, 0
         self._vert_k = (np.zeros(()), np.zeros(()))
-        self._tel: _TelemetryLists | None = None
+        self._tel: list[Telemetry] | None = None   # every vehicle's, built once per step on demand
         self._supervised: set[int] = set()
         self._closed = False
         self.vehicles = [SimVehicle(self, i, (h[0], h[1], h[2]), ctrl=self.ctrl, params=p, limits=limits)
@@ -280,19 +270,55 @@ class SimBackend:
         return math.sqrt(n * n + e * e + d * d)
 
     def telemetry_of(self, i: int) -> Telemetry:
-        """Vehicle ``i``'s telemetry (its lists are built once per step, on first demand)."""
-        c = self._tel if self._tel is not None else self._build_lists()
+        """Vehicle ``i``'s telemetry. The whole fleet's is built once per step, on first demand; a
+        vehicle's armed flag and mode are its own and may change within the step (then re-read)."""
+        tel = (self._tel or self._build_telemetry())[i]
         v = self.vehicles[i]
-        fix = c.fix[i]
-        return Telemetry(self.t_s, tuple(c.pos[i]), tuple(c.vel[i]), c.yaw[i],  # type: ignore[arg-type]
-                         tuple(fix) if c.seq[i] else None, c.seq[i], v.armed, c.landed[i], v.mode,
-                         c.battery[i], c.ready[i], tuple(c.true_pos[i]))  # type: ignore[arg-type]
+        if tel.armed is not v.armed or tel.mode is not v.mode:
+            tel = self._tel[i] = tel._replace(armed=v.armed, mode=v.mode)   # type: ignore[index]
+        return tel
 
-    def _build_lists(self) -> _TelemetryLists:
+    def _build_telemetry(self) -> list[Telemetry]:
+        """Every vehicle's telemetry from the fleet arrays in one pass: the vectors are made by
+        ``zip`` and the records by ``tuple.__new__``, both in C (a NamedTuple's own constructor
+        is Python code)."""
         g = self._gnss
         battery = np.clip(1.0 - self._air_s / self.params.battery_endurance_s, 0.0, 1.0)
-        self._tel = _TelemetryLists(
-            self._est.T.tolist(), self._vel.T.tolist(), self._pos.T.tolist(), g.fix_ned_m.T.tolist(),
-            g.seq.tolist(), self.ctrl.yaw_rad.tolist(), (self.airborne == 0.0).tolist(),
-            battery.tolist(), (g.ready(self.t_s) & ~self._crashed).tolist())
+        seq = g.seq.tolist()
+        fixes = zip(*g.fix_ned_m.tolist(), strict=True)
+        if not all(seq):
+            fixes = [f if s else None for f, s in zip(fixes, seq, strict=True)]
+        t, vehicles, n = self.t_s, self.vehicles, self.n
+        self._tel = list(map(_new_telemetry, zip(
+            repeat(t, n), zip(*self._est.tolist(), strict=True), zip(*self._vel.tolist(), strict=True),
+            self.ctrl.yaw_rad.tolist(), fixes, seq, [v.armed for v in vehicles],
+            (self.airborne == 0.0).tolist(), [v.mode for v in vehicles], battery.tolist(),
+            (g.ready(t) & ~self._crashed).tolist(), zip(*self._pos.tolist(), strict=True), repeat(True, n),
+            strict=False)))   # the repeats are as long as the fleet
         return self._tel
+
+    # ---- fleet state export (the recorder's columnar state rows) --------------------------------
+    def state_columns(self, index: np.ndarray | None = None) -> list[np.ndarray]:
+        """The numeric columns of the ``state`` log rows of vehicles ``index`` (None: all, in order),
+        as telemetry reports them now: estimated position and velocity, latest GNSS fix (NaN before
+        the first), true position (each n, e, d), yaw, battery fraction, landed. Copies, made in a
+        few numpy calls; a crashed vehicle's values are its frozen telemetry's."""
+        g = self._gnss
+        vectors = np.concatenate((self._est, self._vel, g.fix_ned_m, self._pos))   # (12, N), a copy
+        battery = np.clip(1.0 - self._air_s / self.params.battery_endurance_s, 0.0, 1.0)
+        landed = self.airborne == 0.0
+        yaw = self.ctrl.yaw_rad.copy()
+        if index is not None:
+            vectors, yaw, battery, landed = vectors[:, index], yaw[index], battery[index], landed[index]
+        cols = [*vectors, yaw, battery, landed]
+        if self._n_crashed:
+            crashed = self._crash_seen if index is None else self._crash_seen[index]
+            for j in np.flatnonzero(crashed).tolist():
+                tel = self.vehicles[j if index is None else int(index[j])].frozen
+                if tel is not None:
+                    fix = tel.gnss_ned_m or (math.nan,) * 3
+                    values = (*tel.pos_ned_m, *tel.vel_ned_m_s, *fix, *tel.true_pos_ned_m, tel.yaw_rad,
+                              tel.battery_frac, tel.landed)
+                    for col, value in zip(cols, values, strict=True):
+                        col[j] = value
+        return cols

@@ -21,6 +21,7 @@ from swarmbox.hal.sim.params import GRAVITY_M_S2, SimParams
 
 Vec3 = tuple[float, float, float]
 _AUTO = (FlightMode.TAKEOFF, FlightMode.LAND, FlightMode.RTL)
+_POSITION = SetpointKind.POSITION
 
 
 class SimFleet(Protocol):
@@ -84,7 +85,9 @@ class SimVehicle:
         self._ground_since_s: float | None = None
         self._takeoff_d_m = 0.0
         self._braking = False
-        self._last_sp: Setpoint | None = None
+        self._last_sp: Setpoint | None = None   # the setpoint being flown in OFFBOARD
+        self._last_ok: Setpoint | None = None   # ... when the safety check passed it unchanged
+        self._ok_verdict = SetpointVerdict("ok")   # the verdict then
         self._noted: set[tuple[str, str]] = set()   # denials already reported in this mode
 
     # ---- Vehicle protocol ---------------------------------------------------------------------
@@ -131,6 +134,12 @@ class SimVehicle:
         self._set_mode(FlightMode.TAKEOFF)
 
     def setpoint(self, sp: Setpoint) -> SetpointVerdict:
+        if sp == self._last_ok and self.frozen is None:
+            # the setpoint flown since last tick, passed unchanged then; in OFFBOARD and armed (any
+            # mode change forgets it). Only the jump limit depends on the vehicle's state.
+            if sp.kind is not _POSITION or math.dist(sp.ned, self.telemetry().pos_ned_m) <= \
+                    self._limits.max_jump_m:
+                return self._ok_verdict
         if self._refuse("setpoint"):
             return SetpointVerdict("ignored", "disarmed")
         verdict = check_setpoint(sp, self.telemetry(), self._limits)
@@ -141,6 +150,8 @@ class SimVehicle:
                           "requested": [float(x) for x in sp.ned]})
         sp = verdict.setpoint
         if sp is None or (self.mode is FlightMode.OFFBOARD and sp == self._last_sp):
+            if sp is not None and verdict.action == "ok":
+                self._last_ok, self._ok_verdict = sp, result
             return result
         ctrl, i = self._ctrl, self.drone_id
         if sp.kind is SetpointKind.POSITION:
@@ -152,6 +163,8 @@ class SimVehicle:
         ctrl.set_yaw_target(i, sp.yaw_rad)
         self._set_mode(FlightMode.OFFBOARD)
         self._last_sp = sp
+        if verdict.action == "ok":
+            self._last_ok, self._ok_verdict = sp, result
         return result
 
     def land(self) -> None:
@@ -263,7 +276,7 @@ class SimVehicle:
     def _set_mode(self, mode: FlightMode) -> None:
         if mode is not self.mode:
             self._noted.clear()
-        self.mode, self._last_sp, self._ground_since_s = mode, None, None
+        self.mode, self._last_sp, self._last_ok, self._ground_since_s = mode, None, None, None
         self._ctrl.set_offboard_limits(self.drone_id, mode is FlightMode.OFFBOARD)
         self._braking = self._braking and mode is FlightMode.HOLD
         if mode in _AUTO or self._braking or (self.armed and not self._been_airborne):

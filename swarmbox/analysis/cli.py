@@ -20,7 +20,7 @@ from swarmbox.analysis.compare import (
 from swarmbox.analysis.load import RunLoadError, find_runs, find_unfinished, load_run
 from swarmbox.analysis.outputs import metrics_table, write_run, write_sweep
 from swarmbox.analysis.parallel import Reporter
-from swarmbox.analysis.report import AnalysisOptions, RunAnalysis, analyze_run
+from swarmbox.analysis.report import ANALYZED_COLUMNS, AnalysisOptions, RunAnalysis, analyze_run
 from swarmbox.analysis.sweep import SweepOptions, analyze_sweep, summary_wide
 from swarmbox.analysis.tables import to_markdown
 
@@ -85,7 +85,7 @@ def analyze_main(argv: list[str] | None = None) -> int:
     out = args.out or path
     if (path / "run.json").is_file():
         try:
-            run = load_run(path)
+            run = load_run(path, ANALYZED_COLUMNS)
         except RunLoadError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return EXIT_BAD_INPUT

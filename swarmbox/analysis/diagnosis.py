@@ -143,7 +143,8 @@ def drone_series(run: RunData, opts: DiagnosisOptions | None = None,
     disc = disc[disc["node"].isin(drones)].assign(tick=nearest_tick(disc[T], opts.tick_s)).rename(
         columns={"node": "drone"})
     values = {m: _matrix(disc, m, ticks, drones) for m in DISC}
-    flow = network.touching(network.message_flow(run.tables["messages"], opts.tick_s))
+    flow = network.touching(network.message_flow(run.tables["messages"], opts.tick_s),
+                            ["t_send", "t_recv", "latency_ms", "delivered", "counted", "lost"])
     flow = flow[flow["agent"].isin(drones)].rename(columns={"agent": "drone"})
     got = flow[flow["delivered"]]
     values["latency_ms"] = _matrix(got.assign(tick=nearest_tick(got["t_recv"], opts.tick_s)), "latency_ms",

@@ -27,6 +27,7 @@ Safety and swarm metrics align drones on the run's global ``tick``:
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +38,8 @@ from swarmbox.analysis.load import GROUND
 from swarmbox.analysis.unify import T
 
 EXECUTION = 3
+#: Up to this many drones, separation compares every pair directly instead of building k-d trees.
+SMALL_SWARM = 16
 
 
 @dataclass(frozen=True, slots=True)
@@ -190,11 +193,34 @@ def separation_by_tick(state: pd.DataFrame, drones: list[int]) -> pd.Series:
     ticks = np.sort(state["tick"].unique())
     if len(drones) < 2 or len(ticks) == 0:
         return pd.Series(np.nan, index=ticks, dtype="float64")
+    if len(drones) <= SMALL_SWARM:
+        return pd.Series(_dense_gaps(state, cols, drones, ticks), index=ticks, dtype="float64")
     state = state[state["node"].isin(drones)].sort_values("tick", kind="stable")
     pos = state[cols].to_numpy(dtype="float64")
     bounds = np.searchsorted(state["tick"].to_numpy(), ticks, side="left").tolist() + [len(state)]
     best = [nearest_gap(pos[lo:hi]) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
     return pd.Series(best, index=ticks, dtype="float64")
+
+
+def _dense_gaps(state: pd.DataFrame, cols: list[str], drones: list[int], ticks: np.ndarray) -> np.ndarray:
+    """Per tick, the smallest distance over every pair, for a small swarm: all pairs of a block of
+    ticks in one array operation (a k-d tree per tick costs far more than N^2 distances at N <= 16)."""
+    _, pos = _by_tick(state[state["node"].isin(drones)], cols, drones)
+    if len(pos) != len(ticks):   # ticks where no drone of ``drones`` logged: place the others
+        full = np.full((len(ticks), len(drones), len(cols)), np.nan)
+        have = np.searchsorted(ticks, np.sort(state.loc[state["node"].isin(drones), "tick"].unique()))
+        full[have] = pos
+        pos = full
+    i, j = np.triu_indices(len(drones), k=1)
+    out = np.empty(len(ticks))
+    step = max(1, 4_000_000 // max(len(i), 1))   # bound the block to ~100 MB
+    for lo in range(0, len(ticks), step):
+        block = pos[lo:lo + step]
+        d = np.sqrt(((block[:, i] - block[:, j]) ** 2).sum(axis=2))
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)   # all-NaN ticks give NaN, as intended
+            out[lo:lo + step] = np.nanmin(np.where(np.isfinite(d), d, np.nan), axis=1)
+    return out
 
 
 def order_by_tick(state: pd.DataFrame, drones: list[int]) -> pd.Series:

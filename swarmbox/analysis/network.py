@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 from scipy.sparse.csgraph import connected_components
 
+from swarmbox.analysis import flow
 from swarmbox.analysis.load import NET
 from swarmbox.analysis.unify import T
 
@@ -33,37 +34,26 @@ def message_flow(messages: pd.DataFrame, tick_s: float = 0.0) -> pd.DataFrame:
     """One row per (message, destination): send/receive times, latency, delivered / lost / in flight.
 
     ``tick_s``: a message is handled at the first tick after its arrival, so one more tick of
-    margin is given to messages at the end of the run.
+    margin is given to messages at the end of the run. Columns: msg_id, type, src, dst, nbytes,
+    t_send, t_recv, drop_reason, latency_ms, delivered, counted, lost; sorted by (t_send, msg_id,
+    dst). Matched in Arrow (:mod:`swarmbox.analysis.flow`): no pandas join of the whole table.
     """
-    sends = messages[messages["kind"] == "send"]
-    flow = pd.DataFrame({
-        "msg_id": sends["msg_id"].astype("int64"), "type": sends["type"].astype("str"),
-        "src": sends["src"].astype("int64"), "dst": sends["dst"].astype("int64"),
-        "nbytes": sends["nbytes"].astype("float64"), "t_send": sends[T],
-    })
-    recvs = messages[messages["kind"] == "recv"]
-    recvs = pd.DataFrame({"msg_id": recvs["msg_id"].astype("int64"), "dst": recvs["node"].astype("int64"),
-                          "t_recv": recvs[T]})
-    recvs = recvs.sort_values("t_recv").drop_duplicates(["msg_id", "dst"])
-    drops = messages[messages["kind"] == "drop"]
-    drops = pd.DataFrame({"msg_id": drops["msg_id"].astype("int64"), "dst": drops["dst"].astype("int64"),
-                          "drop_reason": drops["reason"].astype("str")}).drop_duplicates(["msg_id", "dst"])
-    flow = flow.merge(recvs, on=["msg_id", "dst"], how="left").merge(drops, on=["msg_id", "dst"], how="left")
-    flow[_LAT] = (flow["t_recv"] - flow["t_send"]) * 1e3
-    flow["delivered"] = flow["t_recv"].notna()
-    logged = set(messages.loc[messages["node"] != NET, "node"].astype("int64").unique())
-    t_end = float(messages[T].max()) if len(messages) else np.nan
-    max_lat = flow.groupby(["src", "dst"])[_LAT].transform("max").fillna(0.0) / 1e3
-    late = flow["t_send"] > t_end - max_lat - (tick_s if np.isfinite(tick_s) else 0.0)
-    in_flight = ~flow["delivered"] & flow["drop_reason"].isna() & late
-    flow["counted"] = flow["dst"].isin(logged) & ~in_flight
-    flow["lost"] = flow["counted"] & ~flow["delivered"]
-    return flow.sort_values(["t_send", "msg_id", "dst"]).reset_index(drop=True)
+    return flow.message_flow(messages, tick_s)
 
 
 def between(flow: pd.DataFrame, t0: float, t1: float) -> pd.DataFrame:
-    """Messages sent in [t0, t1] (unified clock)."""
-    return flow[(flow["t_send"] >= t0) & (flow["t_send"] <= t1)]
+    """Messages sent in [t0, t1] (unified clock).
+
+    A flow from :func:`message_flow` is sorted by send time (unknown times last), so the window is
+    one slice of it, not a filtered copy: at 1,000 drones that copy was ~0.8 GB.
+    """
+    t = flow["t_send"]
+    known = int(t.notna().sum())
+    if t.iloc[:known].is_monotonic_increasing and t.iloc[known:].isna().all():
+        values = t.to_numpy(dtype="float64")[:known]
+        lo, hi = np.searchsorted(values, t0, side="left"), np.searchsorted(values, t1, side="right")
+        return flow.iloc[lo:max(lo, hi)]
+    return flow[(t >= t0) & (t <= t1)]
 
 
 def grouped_stats(frame: pd.DataFrame, keys: list[str], span_s: float) -> pd.DataFrame:
@@ -89,14 +79,27 @@ def link_stats(flow: pd.DataFrame, span_s: float) -> pd.DataFrame:
     return grouped_stats(flow, ["src", "dst"], span_s).reset_index()
 
 
-def touching(flow: pd.DataFrame) -> pd.DataFrame:
-    """Each message twice: once for its sender (``agent`` = src), once for its destination."""
-    return pd.concat([flow.assign(agent=flow["src"]), flow.assign(agent=flow["dst"])], ignore_index=True)
+def touching(flow: pd.DataFrame, columns: list[str] | None = None) -> pd.DataFrame:
+    """Each message twice: once for its sender (``agent`` = src), once for its destination.
+
+    ``columns``: keep only these columns of ``flow`` (besides ``agent``). A large run's flow has
+    millions of rows: doubling only the columns a metric reads keeps the copy small.
+    """
+    columns = list(flow.columns) if columns is None else columns
+    out = {c: np.concatenate([flow[c].to_numpy(), flow[c].to_numpy()]) for c in columns}
+    out["agent"] = np.concatenate([flow["src"].to_numpy(), flow["dst"].to_numpy()])
+    frame = pd.DataFrame(out, copy=False)
+    for c in columns:
+        if frame[c].dtype != flow[c].dtype:
+            frame[c] = frame[c].astype(flow[c].dtype)
+    return frame
 
 
 def agent_stats(flow: pd.DataFrame, span_s: float) -> pd.DataFrame:
     """Per agent, over the messages it sent or that were sent to it; plus tx/rx bytes per second."""
-    out = grouped_stats(touching(flow), ["agent"], span_s).drop(columns="bytes_per_s")
+    both = touching(flow, ["counted", "delivered", "lost", _LAT, "nbytes"])
+    out = grouped_stats(both, ["agent"], span_s).drop(columns="bytes_per_s")
+    del both
     tx = flow.groupby("src")["nbytes"].sum().reindex(out.index).fillna(0.0)
     rx = flow[flow["delivered"]].groupby("dst")["nbytes"].sum().reindex(out.index).fillna(0.0)
     out["tx_bytes_per_s"] = tx / span_s if span_s > 0 else np.nan

@@ -40,7 +40,7 @@ from scipy import stats
 from swarmbox.analysis.catalog import MACHINE_METRICS, Direction, direction_of, unit_of
 from swarmbox.analysis.load import RunLoadError, find_runs, find_unfinished, load_run
 from swarmbox.analysis.parallel import map_runs
-from swarmbox.analysis.report import AnalysisOptions, analyze_run
+from swarmbox.analysis.report import ANALYZED_COLUMNS, AnalysisOptions, analyze_run
 
 log = logging.getLogger(__name__)
 
@@ -79,7 +79,7 @@ def _analyze_one(run_dir: Path, root: Path, opts: AnalysisOptions) -> dict:
     rel = str(run_dir.relative_to(root)) if run_dir != root else "."
     out: dict = {"row": None, "problems": [], "directions": {}, "choices": []}
     try:
-        run = load_run(run_dir)
+        run = load_run(run_dir, ANALYZED_COLUMNS)
     except RunLoadError as exc:
         out["problems"].append({"run": rel, "severity": "skipped", "problem": str(exc)})
         return out

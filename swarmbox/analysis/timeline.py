@@ -35,7 +35,7 @@ def _stamp(t: pd.Series, window_s: float) -> np.ndarray:
 
 
 def network_timeline(flow: pd.DataFrame, drones: list[int], window_s: float) -> pd.DataFrame:
-    both = touching(flow)
+    both = touching(flow, ["t_send", "latency_ms", "delivered", "counted", "lost"])
     both = both[both["agent"].isin(drones)]
     if both.empty:
         return pd.DataFrame(columns=COLUMNS)

@@ -37,17 +37,20 @@ def expand_broadcasts(table: pa.Table) -> pa.Table:
     counts = np.ones(len(table), dtype=np.int64)
     counts[where] = np.where(chars > 0, commas + 1, 0)
     take = np.repeat(np.arange(len(table)), counts)
+    # blank the destination lists before copying rows: a 1,000-drone broadcast copied 1,000 times with
+    # its 4 KB list would overflow a string column's 2 GB capacity, and the copies drop it anyway
+    i_reason = table.column_names.index("reason")
+    in_list = np.zeros(len(table), dtype=bool)
+    in_list[where] = True
+    field = table.schema.field(i_reason)
+    table = table.set_column(i_reason, field, pc.if_else(pa.array(in_list), pa.scalar("", field.type),
+                                                         table.column(i_reason)))
     out = table.take(pa.array(take))
     new_dst = np.repeat(dst, counts)
     firsts = (np.cumsum(counts) - counts)[where]   # where each broadcast's copies start in ``out``
     n_b = counts[where]
     spans = np.repeat(firsts, n_b) + np.arange(int(n_b.sum())) - np.repeat(np.cumsum(n_b) - n_b, n_b)
     new_dst[spans] = pc.cast(ids, pa.int64()).to_numpy(zero_copy_only=False)
-    is_broadcast = np.zeros(len(out), dtype=bool)
-    is_broadcast[spans] = True
-    reason = pc.if_else(pa.array(is_broadcast), pa.scalar("", out.schema.field("reason").type),
-                        out.column("reason"))
-    i_dst, i_reason = out.column_names.index("dst"), out.column_names.index("reason")
-    out = out.set_column(i_dst, out.schema.field(i_dst),
-                         pa.array(new_dst.astype(out.schema.field(i_dst).type.to_pandas_dtype())))
-    return out.set_column(i_reason, out.schema.field(i_reason), reason)
+    i_dst = out.column_names.index("dst")
+    return out.set_column(i_dst, out.schema.field(i_dst),
+                          pa.array(new_dst.astype(out.schema.field(i_dst).type.to_pandas_dtype())))

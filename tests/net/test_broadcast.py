@@ -75,3 +75,16 @@ def test_expansion_gives_the_version_1_rows_in_order():
     assert out.column("reason").to_pylist() == ["", "", "", ""]
     assert out.schema == table.schema
     assert expand_broadcasts(out).equals(out)   # version-1 rows pass through unchanged
+
+
+def test_expanding_a_thousand_drone_broadcast_does_not_copy_its_destination_list():
+    """600 broadcasts to 1,000 drones: copying each 4 KB list to every copy would need 2.4 GB of string
+    data (past Arrow's 2 GB per array); the copies get an empty ``reason`` instead."""
+    dsts = ",".join(map(str, range(1000)))
+    n = 600
+    table = pa.table({"kind": ["send"] * n, "dst": pa.array([BROADCAST] * n, pa.int16()),
+                      "reason": [dsts] * n, "t_s": np.arange(n) * TICK})
+    out = expand_broadcasts(table)
+    assert len(out) == n * 1000
+    assert out.column("dst").to_numpy()[:1000].tolist() == list(range(1000))
+    assert set(out.column("reason").unique().to_pylist()) == {""}

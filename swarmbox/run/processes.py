@@ -28,12 +28,13 @@ from omegaconf import DictConfig, OmegaConf
 
 from swarmbox import monitor
 from swarmbox.core.messages import GROUND_ID
+from swarmbox.hal.mavlink.signing import KEY_ENV
 from swarmbox.record.schema import SCHEMA_VERSION, node_name
 from swarmbox.run import build, mission, node_faults, vehicle_host
 
 _PACKAGE_ROOT = Path(__file__).resolve().parents[2]
 #: The MAVLink 2 signing key of the vehicle links (``backend.signing_key``), handed to agent processes.
-MAVLINK_KEY_ENV = "SWARMBOX_MAVLINK_KEY"
+MAVLINK_KEY_ENV = KEY_ENV   # the MAVLink signing key, handed to agents and vehicle hosts
 #: Config keys whose values never reach a file: the swarm key and the MAVLink signing key.
 SECRET_KEYS = frozenset({"key", "signing_key"})
 POLL_S = 0.2
@@ -303,7 +304,10 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         sitl, vehicles = autopilots(cfg, m, run_dir)
         if sitl is None:
             nodes.nodes_dir.mkdir(parents=True, exist_ok=True)
-            sitl, vehicles = vehicle_host.start(cfg, m, run_dir, child_env())
+            host_env = child_env()   # a signing autopilot holds the key its agents sign with
+            if MAVLINK_KEY_ENV in secrets_env:
+                host_env[MAVLINK_KEY_ENV] = secrets_env[MAVLINK_KEY_ENV]
+            sitl, vehicles = vehicle_host.start(cfg, m, run_dir, host_env)
         nodes.start(secrets_env, vehicles)
         nodes.wait_ready(float(cfg.run.net.ready_timeout_s))
         start = nodes.go(float(cfg.run.net.start_delay_s))

@@ -36,7 +36,10 @@ def finished_run(run_dir: Path, overrides: list[str]) -> dict[str, Any] | None:
     except (OSError, ValueError):
         manifest = {"status": "unreadable"}
     if manifest.get("status") in FINISHED:
-        recorded, wanted = _job_overrides(manifest.get("overrides") or []), _job_overrides(overrides)
+        from swarmbox.run.runner import redacted
+
+        recorded = _job_overrides(manifest.get("overrides") or [])
+        wanted = _job_overrides(redacted(overrides))   # recorded ones hide key values
         if recorded != wanted:
             raise ResumeMismatchError(
                 f"{run_dir} holds a finished run made with overrides {recorded}, not {wanted}; "

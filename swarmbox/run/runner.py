@@ -133,7 +133,7 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
     logs_existed = (run_dir / "logs").exists()
     try:
         run_dir.mkdir(parents=True, exist_ok=True)
-        write_atomic(run_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
+        write_atomic(run_dir / "config.yaml", _public_yaml(cfg))
     except OSError as exc:
         if run_dir.is_dir():
             _discard(run_dir, existed, logs_existed)
@@ -141,7 +141,7 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
                           f"{exc.strerror or exc}") from None
     manifest: dict[str, Any] = {
         "schema": SCHEMA_VERSION, "status": "failed", "reason": "", "traceback": None,
-        "seed": int(cfg.seed), "choices": choices, "overrides": overrides,
+        "seed": int(cfg.seed), "choices": choices, "overrides": redacted(overrides),
         "sim_time_s": 0.0, "wall_time_s": 0.0, "real_time_factor": None, "ticks": 0,
         "tick_s": 1.0 / cfg.run.tick_hz, "n_drones": m.swarm_size,
         "nodes": [node_name(i) for i in [GROUND_ID, *m.drone_ids]], "clocks": build.clock_settings(cfg),
@@ -269,3 +269,20 @@ def summary_line(manifest: dict[str, Any], run_dir: Path) -> str:
     tail = f" ({manifest['reason']})" if manifest["reason"] else ""
     return (f"{head}: {manifest['sim_time_s']:.1f} s simulated in {manifest['wall_time_s']:.2f} s "
             f"({rtf:.0f}x real time){tail}  [{run_dir}]")
+
+
+def _public_yaml(cfg: DictConfig) -> str:
+    """The resolved config as written to ``config.yaml``: a MAVLink signing key is never written."""
+    if not OmegaConf.select(cfg, "backend.signing_key", default=None):
+        return OmegaConf.to_yaml(cfg, resolve=True)
+    public = OmegaConf.to_container(cfg, resolve=True)
+    public["backend"]["signing_key"] = None   # type: ignore[index]
+    return OmegaConf.to_yaml(OmegaConf.create(public))
+
+
+def redacted(overrides: list[str]) -> list[str]:
+    """``overrides`` with the value of every key setting hidden (``backend.signing_key=***``)."""
+    if not any("key=" in o for o in overrides):
+        return overrides
+    from swarmbox.run.processes import redact
+    return redact(overrides)

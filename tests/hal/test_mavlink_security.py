@@ -103,3 +103,19 @@ def test_wrong_system_id_is_named_not_reported_as_silence():
     finally:
         proc.kill()
         proc.wait()
+
+
+def test_a_wrongly_signed_packet_cannot_block_the_real_senders_stream():
+    """pymavlink records a new stream's timestamp before checking the signature; the decoder forgets
+    what a rejected packet recorded, so a wrong key with a later timestamp is not a denial of service."""
+    dec = mc.Decoder({mc.MSG["COMMAND_LONG"]}, KEY)
+    real = mc.GcsEncoder(signing_key=KEY)                       # older timestamps: created first
+    later = mc.GcsEncoder(signing_key=signing_key_of("not the key"))
+    later._mav.signing.timestamp += 10**6                       # ten seconds ahead of the real sender
+    arm = (1.0, 0, 0, 0, 0, 0, 0)
+    assert list(dec.decode(later.command((1, 1), mc.CMD_ARM_DISARM, arm))) == []
+    assert dec.signature_rejected == 1
+    assert len(list(dec.decode(real.command((1, 1), mc.CMD_ARM_DISARM, arm)))) == 1
+    assert len(list(dec.decode(real.command((1, 1), mc.CMD_ARM_DISARM, arm)))) == 1
+    replay = real.command((1, 1), mc.CMD_ARM_DISARM, arm)
+    assert len(list(dec.decode(replay))) == 1 and list(dec.decode(replay)) == []   # a replay still is one

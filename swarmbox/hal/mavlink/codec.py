@@ -320,8 +320,11 @@ class Decoder:
     def __init__(self, wanted: set[int] | frozenset[int], signing_key: bytes | None = None) -> None:
         self.wanted = set(wanted)
         self._mav = mavlink.MAVLink(None)
+        #: pymavlink's per-stream signing timestamps (None: signing off)
+        self._stamps: dict[Any, int] | None = None
         if signing_key is not None:
             self._mav.signing.secret_key = signing_key   # pymavlink then rejects unsigned packets
+            self._stamps = self._mav.signing.stream_timestamps
         self.packets = self.decoded = self.skipped = self.bad_packets = self.garbage_bytes = 0
         self.signature_rejected = 0
         self.skipped_ids: dict[int, int] = {}
@@ -338,12 +341,21 @@ class Decoder:
                 self.skipped += 1
                 self.skipped_ids[item.msg_id] = self.skipped_ids.get(item.msg_id, 0) + 1
                 continue
+            stamps = self._stamps
+            before = dict(stamps) if stamps is not None else None
             try:
                 msg = mav.decode(bytearray(data[item.start:item.end]))
                 value = DECODERS[item.msg_id](msg)
             except MAVError as exc:
                 self.bad_packets += 1
-                self.signature_rejected += str(exc) == "Invalid signature"
+                if str(exc) == "Invalid signature":
+                    self.signature_rejected += 1
+                    if stamps is not None:
+                        # pymavlink records a new stream's timestamp before it checks the signature, so
+                        # one packet with a wrong key and a later timestamp would make every later packet
+                        # of the real sender look like a replay: forget what a rejected packet recorded
+                        stamps.clear()
+                        stamps.update(before)
                 continue
             except (KeyError, ValueError, TypeError, AttributeError):
                 self.bad_packets += 1

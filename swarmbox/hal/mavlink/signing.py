@@ -11,6 +11,8 @@ import hashlib
 import time
 
 SIGNING_EPOCH_S = 1420070400   # 2015-01-01: MAVLink signing timestamps count 10 µs from here
+#: environment variable that hands a signing key to a child process (never its command line or a log)
+KEY_ENV = "SWARMBOX_MAVLINK_KEY"
 
 
 def signing_timestamp(now_s: float | None = None) -> int:

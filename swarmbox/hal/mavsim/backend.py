@@ -24,6 +24,7 @@ import numpy as np
 
 from swarmbox.hal.launch import ProcessSet
 from swarmbox.hal.mavlink.frames import GeoFrame
+from swarmbox.hal.mavlink.signing import KEY_ENV
 from swarmbox.hal.px4.backend import BootClock, Px4Backend
 from swarmbox.hal.safety import SafetyLimits
 from swarmbox.hal.sim.params import SimParams
@@ -64,8 +65,9 @@ class MavsimLauncher(ProcessSet):
     what = "mavsim vehicle"
 
     def __init__(self, homes: list[Vec3], frame: GeoFrame, speed: float, seeds: list[int],
-                 options: MavsimOptions, run_dir: Path | None) -> None:
+                 options: MavsimOptions, run_dir: Path | None, signing_key: str | None = None) -> None:
         self.homes, self.frame, self.speed, self.seeds, self.options = homes, frame, speed, seeds, options
+        self.signing_key = signing_key   # handed to the vehicles in their environment, never their argv
         self._own_dir = run_dir is None
         self.log_dir = (Path(tempfile.mkdtemp(prefix="swarmbox_mavsim_")) if run_dir is None
                         else run_dir / "mavsim")
@@ -94,6 +96,8 @@ class MavsimLauncher(ProcessSet):
     def start(self, local_ports: list[int]) -> None:
         self.log_dir.mkdir(parents=True, exist_ok=True)
         env = dict(os.environ)
+        if self.signing_key:
+            env[KEY_ENV] = str(self.signing_key)
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(_PACKAGE_ROOT), env.get("PYTHONPATH")]))
         atexit.register(self.stop)
         for i, port in enumerate(local_ports):
@@ -167,7 +171,8 @@ class MavsimBackend(Px4Backend):
     def _make_launcher(self, homes: list[Vec3]) -> MavsimLauncher | None:
         if self.params.connections:   # vehicles that already run (a shared host of a distributed run)
             return None
-        return MavsimLauncher(homes, self.frame, self.params.speed, self._seeds, self.options, self.run_dir)
+        return MavsimLauncher(homes, self.frame, self.params.speed, self._seeds, self.options, self.run_dir,
+                              self.params.signing_key)
 
     @property
     def processes(self) -> list[subprocess.Popen[bytes]]:

@@ -18,6 +18,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from swarmbox.hal.mavlink.codec import MSG, PREARM_CHECK_BIT
 from swarmbox.hal.mavlink.frames import GeoFrame, deg_e7
+from swarmbox.hal.mavlink.signing import signing_timestamp
 
 Vec3 = tuple[float, float, float]
 BASE_MODE = (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
@@ -88,8 +89,12 @@ class Streams:
 class VehicleEncoder:
     """Packs the autopilot's messages; positions are converted with ``home`` (the EKF origin)."""
 
-    def __init__(self, system_id: int, home: GeoFrame) -> None:
+    def __init__(self, system_id: int, home: GeoFrame, signing_key: bytes | None = None) -> None:
         self._mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=1)
+        if signing_key is not None:   # MAVLink 2 signing of everything the vehicle sends
+            sign = self._mav.signing
+            sign.secret_key, sign.link_id, sign.sign_outgoing = signing_key, 0, True
+            sign.timestamp = signing_timestamp()
         self.home = home
         self._build: dict[int, Callable[[VehicleState], object]] = {
             MSG["HEARTBEAT"]: self._heartbeat, MSG["SYS_STATUS"]: self._sys_status,

@@ -43,6 +43,7 @@ from swarmbox.hal.mavlink.codec import (
     SetpointTargetMsg,
 )
 from swarmbox.hal.mavlink.frames import GeoFrame
+from swarmbox.hal.mavlink.signing import KEY_ENV, signing_key_of
 from swarmbox.hal.mavsim.commander import Commander
 from swarmbox.hal.mavsim.link import DEFAULT_RATES_HZ, AutopilotSocket, Streams, VehicleEncoder, VehicleState
 from swarmbox.hal.safety import SafetyLimits
@@ -130,9 +131,14 @@ class MavsimProgram:
                                    offboard_loss_action=args.offboard_loss, refuse=frozenset(args.refuse))
         remote, local = ports_of(args.port_plan, args.instance)
         self.link = AutopilotSocket(local, remote)
-        self.encoder = VehicleEncoder(self.system_id, self.home)
+        # MAVLink 2 signing, as a signing autopilot does it: with a key (handed over in the environment,
+        # never on the command line) the vehicle signs what it sends and obeys only packets signed with it
+        key_text = os.environ.get(KEY_ENV)
+        self.signed = bool(key_text)
+        key = signing_key_of(key_text) if key_text else None
+        self.encoder = VehicleEncoder(self.system_id, self.home, signing_key=key)
         self.streams = Streams(DEFAULT_RATES_HZ)
-        self.decoder = Decoder(WANTED)
+        self.decoder = Decoder(WANTED, key)
         self.stop = False
         self._gnss_seq, self._gnss_t_s = 0, 0.0
         self.ignored = 0   # packets for another system, or setpoints it cannot fly
@@ -260,11 +266,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     signal.signal(signal.SIGUSR1, _toggle_radio)
     link, name = program.link, f"mavsim {args.instance}"
     print(f"{name}: system {program.system_id}, listening on 127.0.0.1:{link.local_port}, "
-          f"sending to {link.peer[1]}, speed {args.speed:g}", file=sys.stderr, flush=True)
+          f"sending to {link.peer[1]}, speed {args.speed:g}, signing {'on' if program.signed else 'off'}",
+          file=sys.stderr, flush=True)
     code = program.run()
     print(f"{name}: stopped at t={program.sim.t_s:.1f} s (sim), sent {link.tx_bytes} B, "
           f"received {link.rx_bytes} B, ignored {program.ignored} packets, "
-          f"garbage {program.decoder.garbage_bytes} B", file=sys.stderr, flush=True)
+          f"garbage {program.decoder.garbage_bytes} B, unsigned or wrongly signed "
+          f"{program.decoder.signature_rejected} packets", file=sys.stderr, flush=True)
     return code
 
 

@@ -16,7 +16,6 @@ import json
 import os
 import secrets
 import signal
-import socket
 import subprocess
 import sys
 import time as wall
@@ -44,18 +43,7 @@ class LaunchError(RuntimeError):
     """A node process could not be started or never became ready."""
 
 
-def free_ports(n: int) -> list[int]:
-    """``n`` distinct TCP ports the OS reports free on 127.0.0.1."""
-    socks = []
-    try:
-        for _ in range(n):
-            s = socket.socket()
-            s.bind(("127.0.0.1", 0))
-            socks.append(s)
-        return [s.getsockname()[1] for s in socks]
-    finally:
-        for s in socks:
-            s.close()
+free_ports = vehicle_host.free_ports   # TCP ports for the Zenoh endpoints
 
 
 def child_env() -> dict[str, str]:

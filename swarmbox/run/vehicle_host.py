@@ -4,8 +4,8 @@ The launcher starts it before the nodes (the vehicles stand for autopilots, whic
 the companion computers), on one free UDP port of 127.0.0.1 per vehicle for the agent's bridge;
 each agent then connects to its vehicle (``plan.json`` ``vehicles``) as to a running autopilot.
 The vehicle outlives its agent: an agent killed and restarted finds its drone where the
-failsafe left it (untested: the rejoin test uses one vehicle per agent). The host runs :mod:`swarmbox.hal.mavsim.host`; its output is in
-``nodes/mavsim_host.log``.
+failsafe left it (untested: the rejoin test uses one vehicle per agent). The host runs
+:mod:`swarmbox.hal.mavsim.host`; its output is in ``nodes/mavsim_host.log``.
 """
 
 from __future__ import annotations
@@ -29,11 +29,12 @@ HOSTS = ("agent", "shared")
 STOP_TIMEOUT_S = 10.0
 
 
-def free_udp_ports(n: int) -> list[int]:
+def free_ports(n: int, kind: int = socket.SOCK_STREAM) -> list[int]:
+    """``n`` distinct ports (TCP, or UDP with ``socket.SOCK_DGRAM``) the OS reports free on 127.0.0.1."""
     socks = []
     try:
         for _ in range(n):
-            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            s = socket.socket(socket.AF_INET, kind)
             s.bind(("127.0.0.1", 0))
             socks.append(s)
         return [s.getsockname()[1] for s in socks]
@@ -93,7 +94,7 @@ def start(cfg: DictConfig, m: Any, run_dir: Path, env: dict[str, str]) -> tuple[
     seeds = [int(s) for s in rng.integers(0, 2**31 - 1, size=len(homes))]
     frame = GeoFrame(float(b["origin_lat_deg"]), float(b["origin_lon_deg"]), float(b["origin_alt_m"]))
     plan = MavsimLauncher(homes, frame, float(b["speed"]), seeds, options, run_dir / "nodes")
-    ports = free_udp_ports(len(homes))
+    ports = free_ports(len(homes), socket.SOCK_DGRAM)
     vehicles = [plan.command(k, port)[3:] for k, port in enumerate(ports)]   # drop "python -m module"
     for argv in vehicles:
         k = argv.index("--parent-pid")

@@ -87,11 +87,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _stop)
     signal.signal(signal.SIGINT, _stop)
     for p in host.programs:
-        print(f"mavsim host: system {p.system_id} on 127.0.0.1:{p.link.local_port} -> {p.link.peer[1]}",
-              file=sys.stderr, flush=True)
+        print(f"mavsim host: system {p.system_id} on 127.0.0.1:{p.link.local_port} -> {p.link.peer[1]}, "
+              f"signing {'on' if p.signed else 'off'}", file=sys.stderr, flush=True)
     code = host.run()
-    print(f"mavsim host: {len(host.programs)} vehicles stopped at t={host.programs[0].sim.t_s:.1f} s (sim)",
-          file=sys.stderr, flush=True)
+    rejected = sum(p.decoder.signature_rejected for p in host.programs)
+    print(f"mavsim host: {len(host.programs)} vehicles stopped at t={host.programs[0].sim.t_s:.1f} s (sim), "
+          f"unsigned or wrongly signed {rejected} packets", file=sys.stderr, flush=True)
     return code
 
 

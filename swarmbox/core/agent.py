@@ -24,7 +24,7 @@ from swarmbox.api import (
     Telemetry,
 )
 from swarmbox.core.delivery import Window
-from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck, TaskCommand, make_msg_id
+from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck, TaskCommand
 from swarmbox.core.node import STAGE_OF, Node, call_hook, hook_error
 from swarmbox.core.stages import TERMINAL, Stage, path_to
 
@@ -32,7 +32,7 @@ _KIND_NAMES = {SetpointKind.POSITION: "position", SetpointKind.VELOCITY: "veloci
                SetpointKind.ACCELERATION: "acceleration"}
 _LOOP_HOOK = {Stage.PREPARATION: "prep_loop/prep_complete", Stage.EXECUTION: "exec_loop/exec_complete"}
 #: Mode text by mode (``FlightMode.value`` is a Python-level property; a dict lookup is not).
-_MODE_TEXT = {m: m.value for m in FlightMode}
+MODE_TEXT = {m: m.value for m in FlightMode}
 _NAN = float("nan")
 _new_state = partial(tuple.__new__, DroneState)
 _new_report = partial(tuple.__new__, Report)   # Report(*all 13 fields), built in C
@@ -67,7 +67,6 @@ class AgentNode(Node):
         self._window_busy = False   # a stage change may release held tasks: drain even without mail
         self._state_every = t.state_every_ticks
         self.own_state_rows = True   # False: a fleet-wide log writes this drone's state rows
-        self._msg_id_base = make_msg_id(node_id, 0)
         self._log_state = kw["log"].appender("state")
         self._log_setpoint = kw["log"].appender("setpoints")
         self.net.subscribe(node_id, superior)
@@ -279,9 +278,8 @@ class AgentNode(Node):
         else:   # a leaf (most drones): nothing below it
             total = alive = 0
             complete, below = self.complete, ()
-        self._seq += 1
         superior = self.superior
-        net.send(_new_report((self._msg_id_base | self._seq, now, node_id, superior, int(stage), complete,
+        net.send(_new_report((self.next_msg_id(), now, node_id, superior, int(stage), complete,
                               total + 1, alive + (stage is not Stage.ABORT), tel.pos_ned_m, tel.vel_ned_m_s,
                               disc, self.report_data, below)), superior)
 
@@ -290,5 +288,5 @@ class AgentNode(Node):
         g = tel.gnss_ned_m or _NAN3
         tp = tel.true_pos_ned_m or _NAN3
         self._log_state((self.clock.now(), self.time.tick, int(self.stage), tel.armed, tel.landed,
-                         _MODE_TEXT[tel.mode], p[0], p[1], p[2], v[0], v[1], v[2], g[0], g[1], g[2],
+                         MODE_TEXT[tel.mode], p[0], p[1], p[2], v[0], v[1], v[2], g[0], g[1], g[2],
                          tp[0], tp[1], tp[2], tel.yaw_rad, tel.battery_frac))

@@ -93,6 +93,7 @@ class Node:
         self._alive_view = MappingProxyType(self._alive)
         self.regroup_until_tick = -1   # a lost inferior's own inferiors may still be handing over
         self._seq = 0
+        self._msg_id_base = make_msg_id(node_id, 0)   # | seq: the same id, one OR per message
         self.outbox = Outbox(timing.task_retry_ticks, timing.task_max_retries)
         self._log_stage = log.appender("stages")
         self._log_event = log.appender("events")
@@ -101,7 +102,7 @@ class Node:
     # -- ids, logging ---------------------------------------------------------------------------
     def next_msg_id(self) -> int:
         self._seq += 1
-        return make_msg_id(self.node_id, self._seq)
+        return self._msg_id_base | self._seq
 
     def event(self, kind: str, name: str, subject: int = NO_SUBJECT, **data: Any) -> None:
         self._log_event((self.clock.now(), self.time.tick, kind, name, subject,

@@ -17,6 +17,7 @@ import time as wall
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Protocol
 
 from swarmbox.core.agent import AgentNode
 from swarmbox.core.clock import TimeSource
@@ -48,6 +49,15 @@ class Outcome:
         return self.sim_time_s / self.wall_time_s if self.wall_time_s > 0 else float("inf")
 
 
+class StateLog(Protocol):
+    """Writes the state rows of every agent that ticked, as one block (``record.fleet.FleetStateLog``)."""
+
+    def __call__(self, tick: int) -> None: ...
+
+    def refresh(self) -> None:
+        """Take note of an agent removed from the loop."""
+
+
 class Swarm:
     """Owns the nodes, the network, the backend and the clock of one run."""
 
@@ -63,7 +73,7 @@ class Swarm:
         self.end_watch = EndWatch(ground.timing.lost_superior_ticks)   # every drone down or lost
         #: Writes every agent's state row of a tick as one block (set by the builder when the backend
         #: exports its fleet arrays; otherwise each agent logs its own row).
-        self.state_log: Callable[[int], None] | None = None
+        self.state_log: StateLog | None = None
 
     def schedule(self, at_s: float, action: Callable[[Swarm], None]) -> None:
         """Run ``action(swarm)`` at the first tick at or after true time ``at_s``."""
@@ -77,7 +87,7 @@ class Swarm:
         agent = self._by_id[drone_id]
         agent.removed = agent.finished = True
         if self.state_log is not None:
-            self.state_log.refresh()   # type: ignore[attr-defined]
+            self.state_log.refresh()
         self.medium.disconnect(drone_id)
         agent.event("failsafe", "node_removed", drone_id, action="land")
         agent.vehicle.land()

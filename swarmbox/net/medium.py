@@ -86,7 +86,7 @@ class SimMedium:
         self._fifo: deque = deque()       # same items, for messages with the default constant delay
         self._seq = 0
         self.hooks: list[LinkHook] = []
-        self._ideal = not (default.jitter_s or default.loss_prob)   # and no links: see _is_ideal
+        self._ideal = not (default.jitter_s or default.loss_prob)   # and no links or hooks: _plain()
         self._fanout: dict[int, tuple[tuple[int, ...], str, bool]] = {}   # publisher -> dsts, text, reachable
 
     # -- membership -----------------------------------------------------------------------------
@@ -137,11 +137,16 @@ class SimMedium:
         mtype, nbytes = MESSAGE_TYPES[type(msg)], msg.nbytes
         sender.log((sender.clock.now(), tick, "send", msg.msg_id, mtype, src, BROADCAST, nbytes, msg.t_sent_s,
                     text))
-        if reachable and self._ideal and not self._links and not self.hooks:
+        if reachable and self._plain():
             self._fifo.append((t + self._default.latency_s, tick, 0, dsts, msg, mtype, nbytes))
             return
         for dst in dsts:
             self._route(msg, src, dst, t, tick, mtype, nbytes)
+
+    def _plain(self) -> bool:
+        """Every link has the default constant delay and no loss, and no fault hook is installed (hooks
+        come and go with faults, so this is asked, not stored)."""
+        return self._ideal and not self._links and not self.hooks
 
     def _fan(self, src: int) -> tuple[tuple[int, ...], str, bool]:
         dsts = tuple(self._subscribers.get(src, ()))
@@ -158,7 +163,7 @@ class SimMedium:
         t, tick = self._time.t_s, self._time.tick
         mtype, nbytes = MESSAGE_TYPES[type(msg)], msg.nbytes
         sender.log((sender.clock.now(), tick, "send", msg.msg_id, mtype, src, dst, nbytes, msg.t_sent_s, ""))
-        if self._ideal and not self._links and not self.hooks:
+        if self._plain():
             receiver = self._nodes.get(dst)
             if receiver is not None and receiver.connected:   # ideal and reachable: no draw, FIFO
                 self._fifo.append((t + self._default.latency_s, tick, 0, dst, msg, mtype, nbytes))
@@ -167,7 +172,7 @@ class SimMedium:
 
     def _route(self, msg, src: int, dst: int, t: float, tick: int, mtype: str, nbytes: int) -> None:
         """Impair one (message, destination) and queue it, or log its drop."""
-        if self._links or self.hooks or not self._ideal:
+        if not self._plain():
             spec = self._links.get((src, dst), self._default) if self._links else self._default
             delay, reason = spec.impair(self._rng, self.hooks, msg, src, dst, t)
         else:

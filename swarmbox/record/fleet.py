@@ -16,10 +16,9 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from swarmbox.api import FlightMode
+from swarmbox.core.agent import MODE_TEXT
 from swarmbox.core.clock import readings
 
-_MODE_TEXT = {m: m.value for m in FlightMode}
 _TELEMETRY, _STAGE = attrgetter("telemetry"), attrgetter("stage")
 _ARMED, _MODE = attrgetter("armed"), attrgetter("mode")
 
@@ -67,7 +66,7 @@ class FleetStateLog:
         t_s = readings(self._clocks, self._time.t_s)
         stage = np.fromiter(map(int, map(_STAGE, live)), dtype=np.int8, count=n)
         armed = np.fromiter(map(_ARMED, tels), dtype=bool, count=n)
-        mode = np.array(list(map(_MODE_TEXT.__getitem__, map(_MODE, tels))), dtype=object)
+        mode = np.array(list(map(MODE_TEXT.__getitem__, map(_MODE, tels))), dtype=object)
         nums = self.backend.state_columns(self._index)
         landed = nums.pop()
         self.sink.state_block(self._nodes, [t_s, np.full(n, tick, dtype=np.int64), stage, armed, landed,

@@ -41,3 +41,18 @@ def sweep_dir(tmp_path_factory) -> Path:
     for i, (_, sc) in enumerate(sweep_scenarios()):
         build_run(root / str(i), sc)   # directory names carry no meaning
     return root
+
+
+SHORT = ("algo.params.start_s=3", "algo.params.angular_rate_rad_s=0.25", "algo.params.complete_after_s=10",
+         "network=wifi", "run.clocks={drone_2: {offset_s: 0.5, drift_ppm: 100}}")
+
+
+@pytest.fixture(scope="session")
+def formation_run(tmp_path_factory) -> Path:
+    """A real formation run from the runner: short, on the lossy wifi network, drone 2's clock skewed."""
+    from tests.conftest import run_config
+
+    run_dir = tmp_path_factory.mktemp("real") / "formation"
+    manifest = run_config(run_dir, SHORT)
+    assert manifest["status"] == "ok", manifest["reason"]
+    return run_dir

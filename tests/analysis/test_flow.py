@@ -89,15 +89,6 @@ def test_network_module_uses_the_arrow_flow(make_run):
                                   reference_flow(run.tables["messages"], 0.025))
 
 
-@pytest.fixture(scope="module")
-def formation_run(tmp_path_factory):
-    from tests.analysis.test_real_run import SHORT
-    from tests.conftest import run_config
-
-    run_dir = tmp_path_factory.mktemp("flow") / "formation"
-    manifest = run_config(run_dir, SHORT)
-    assert manifest["status"] == "ok", manifest["reason"]
-    return run_dir
 
 
 WINDOWS = [(2.0, 17.0), (-1.0, 99.0), (5.0, 4.0), (2.0125, 2.0125), (30.0, 40.0)]

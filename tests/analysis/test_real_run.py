@@ -9,18 +9,7 @@ from swarmbox.analysis import figures
 from swarmbox.analysis.report import analyze_run
 from tests.conftest import ROOT
 
-SHORT = ("algo.params.start_s=3", "algo.params.angular_rate_rad_s=0.25", "algo.params.complete_after_s=10",
-         "network=wifi", "run.clocks={drone_2: {offset_s: 0.5, drift_ppm: 100}}")
-
-
-@pytest.fixture(scope="module")
-def formation_run(tmp_path_factory):
-    from tests.conftest import run_config
-
-    run_dir = tmp_path_factory.mktemp("real") / "formation"
-    manifest = run_config(run_dir, SHORT)
-    assert manifest["status"] == "ok", manifest["reason"]
-    return run_dir
+# ``formation_run``: a short formation on wifi with a skewed clock (tests/analysis/conftest.py)
 
 
 def test_metrics_of_a_real_run(formation_run):

@@ -38,6 +38,18 @@ def _close_ticks(run_dir, limit_m):
     return out
 
 
+def _both_drones_of_each_pair_told(d) -> None:
+    """The crossing's pairs (0, 1) and (0, 2): the ground sent alerts to 0, 1 and 2, and each drone's
+    algorithm hook heard of exactly the drones it came close to."""
+    for i, others in {0: {1, 2}, 1: {0}, 2: {0}, 3: set()}.items():
+        ev = table(d, f"drone_{i}", "events")
+        warned = {json.loads(x)["other"] for x in ev.loc[ev["name"] == "near_miss_warning", "data"]}
+        assert warned == others, i
+    sent = table(d, "ground", "messages")
+    prox = sent[(sent["kind"] == "send") & (sent["type"] == "prox")]
+    assert set(prox["dst"]) == {0, 1, 2}
+
+
 def test_alerts_exactly_the_pairs_that_came_within_10_m_with_start_and_end(run):
     manifest, d = run(*CROSSING)
     assert manifest["status"] == "ok", manifest["reason"]
@@ -51,14 +63,7 @@ def test_alerts_exactly_the_pairs_that_came_within_10_m_with_start_and_end(run):
         assert (last + 1) * TICK_S < end_t <= (last + 3) * TICK_S + 1e-9, pair
         assert ep["breached"] and not ep["predicted"]
         assert ep["min_distance_m"] == pytest.approx(min_d, abs=0.15)
-    # both drones of each pair were told, through the algorithm hook
-    for i, others in {0: {1, 2}, 1: {0}, 2: {0}, 3: set()}.items():
-        ev = table(d, f"drone_{i}", "events")
-        warned = {json.loads(x)["other"] for x in ev.loc[ev["name"] == "near_miss_warning", "data"]}
-        assert warned == others, i
-    sent = table(d, "ground", "messages")
-    prox = sent[(sent["kind"] == "send") & (sent["type"] == "prox")]
-    assert set(prox["dst"]) == {0, 1, 2}
+    _both_drones_of_each_pair_told(d)
 
 
 @pytest.mark.parametrize("topology", ["tree", "leader_follower"])
@@ -76,13 +81,7 @@ def test_drones_below_a_direct_inferior_are_alerted_too(run, topology):
         # a forwarded position is one more Report trip (one tick) older than a direct one
         assert first * TICK_S < ep["start_t_s"] <= (first + 3) * TICK_S + 1e-9, pair
         assert (last + 1) * TICK_S < end_t <= (last + 4) * TICK_S + 1e-9, pair
-    for i, others in {0: {1, 2}, 1: {0}, 2: {0}, 3: set()}.items():
-        ev = table(d, f"drone_{i}", "events")
-        warned = {json.loads(x)["other"] for x in ev.loc[ev["name"] == "near_miss_warning", "data"]}
-        assert warned == others, i
-    sent = table(d, "ground", "messages")
-    prox = sent[(sent["kind"] == "send") & (sent["type"] == "prox")]
-    assert set(prox["dst"]) == {0, 1, 2}
+    _both_drones_of_each_pair_told(d)
     for i in (1, 2):   # received straight from the ground, then the all clear
         got = table(d, f"drone_{i}", "messages")
         got = got[(got["kind"] == "recv") & (got["type"] == "prox")]

@@ -67,16 +67,21 @@ def test_free_ports_are_distinct_and_bindable():
     assert len(set(ports)) == 5 and all(1024 < p < 65536 for p in ports)
 
 
-def test_a_fleet_fault_is_refused_before_any_process_starts(tmp_path):
+def _refused_before_any_process(tmp_path, override: str) -> dict:
+    """A processes-runtime run with ``override`` that fails before it starts a node process."""
     from swarmbox.run.runner import execute
     from tests.conftest import compose_config
 
-    cfg, choices = compose_config(["run.runtime=processes", "backend=mavsim", "fault=gps_drift",
-                                   "run.progress=false"])
+    cfg, choices = compose_config(["run.runtime=processes", "backend=mavsim", override, "run.progress=false"])
     manifest = execute(cfg, tmp_path, choices, [])
     assert manifest["status"] == "failed"
-    assert "gps_drift cannot run with run.runtime=processes" in manifest["reason"]
     assert not (tmp_path / "nodes").exists()
+    return manifest
+
+
+def test_a_fleet_fault_is_refused_before_any_process_starts(tmp_path):
+    manifest = _refused_before_any_process(tmp_path, "fault=gps_drift")
+    assert "gps_drift cannot run with run.runtime=processes" in manifest["reason"]
     assert "key: null" in (tmp_path / "config.yaml").read_text()
 
 
@@ -86,15 +91,8 @@ def test_keys_given_on_the_command_line_are_not_recorded():
 
 
 def test_an_unknown_vehicle_host_is_refused_before_any_process_starts(tmp_path):
-    from swarmbox.run.runner import execute
-    from tests.conftest import compose_config
-
-    cfg, choices = compose_config(["run.runtime=processes", "backend=mavsim", "run.net.vehicle_host=cloud",
-                                   "run.progress=false"])
-    manifest = execute(cfg, tmp_path, choices, [])
-    assert manifest["status"] == "failed"
+    manifest = _refused_before_any_process(tmp_path, "run.net.vehicle_host=cloud")
     assert "run.net.vehicle_host must be one of agent, shared, got 'cloud'" in manifest["reason"]
-    assert not (tmp_path / "nodes").exists()
 
 
 def test_a_restarted_node_appends_its_rows_after_the_earlier_segments(tmp_path):

@@ -15,8 +15,8 @@ import pytest
 from swarmbox.api import Setpoint
 from swarmbox.hal.mavlink import codec as mc
 from swarmbox.hal.mavlink.frames import GeoFrame
-from swarmbox.hal.mavsim.process import VEHICLE_LIMITS, ports_of
 from swarmbox.hal.mavsim.commander import Commander
+from swarmbox.hal.mavsim.process import VEHICLE_LIMITS, ports_of
 from swarmbox.hal.sim.backend import SimBackend
 from tests import realtime
 
@@ -166,7 +166,8 @@ class Gcs:
 @pytest.fixture
 def vehicle():
     gcs = Gcs()
-    cmd = [sys.executable, "-m", "swarmbox.hal.mavsim.process", "--instance", "2", "--home-n", "10", "--home-e", "-5",
+    cmd = [sys.executable, "-m", "swarmbox.hal.mavsim.process", "--instance", "2",
+           "--home-n", "10", "--home-e", "-5",
            "--port-plan", f"{gcs.port}:0", "--speed", str(VEHICLE_SPEED), "--max-wall-s", "60"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:

@@ -132,8 +132,8 @@ def test_runner_stays_small(tmp_path):
 
 def test_px4_path_imports_neither_the_simulator_nor_analysis_libraries():
     code = ("import sys, swarmbox.hal.px4.backend, swarmbox.hal.px4.sitl, swarmbox.hal.mavsim.backend; "
-            "print(sorted({'pandas', 'matplotlib', 'seaborn', 'pymunk', 'swarmbox.hal.sim.backend', 'pyulog'} "
-            "& set(sys.modules)))")
+            "print(sorted({'pandas', 'matplotlib', 'seaborn', 'pymunk', 'swarmbox.hal.sim.backend', "
+            "'pyulog'} & set(sys.modules)))")
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0 and proc.stdout.strip() == "[]", proc.stdout + proc.stderr
 

@@ -48,7 +48,8 @@ def test_failed_run_exits_non_zero_but_a_sweep_continues(tmp_path):
     assert single.returncode == 1 and "deliberate failure" in single.stderr
     assert json.loads((tmp_path / "single" / "run.json").read_text())["status"] == "failed"
     sweep = swarmbox_run("-m", "algo=hover", "mission=hover", "algo.drone._target_=tests.run.algos."
-                         "CrashingDrone,swarmbox.algorithms.hover.HoverDrone", f"hydra.sweep.dir={tmp_path / 'sw'}",
+                         "CrashingDrone,swarmbox.algorithms.hover.HoverDrone",
+                         f"hydra.sweep.dir={tmp_path / 'sw'}",
                          "~hydra.callbacks.analyze")
     statuses = sorted(json.loads(p.read_text())["status"] for p in (tmp_path / "sw").glob("*/run.json"))
     assert statuses == ["failed", "ok"]

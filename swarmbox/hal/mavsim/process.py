@@ -57,7 +57,8 @@ WANTED = frozenset({MSG["HEARTBEAT"], MSG["COMMAND_LONG"], MSG["SET_POSITION_TAR
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(prog="python -m swarmbox.hal.mavsim.process", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m swarmbox.hal.mavsim.process",
+                                 description=__doc__.split("\n\n")[0])
     ap.add_argument("--instance", type=int, required=True, help="vehicle index i (system id i+1)")
     ap.add_argument("--system-id", type=int, default=None, help="override the system id")
     ap.add_argument("--home-n", type=float, default=0.0, help="home, metres north of the origin")

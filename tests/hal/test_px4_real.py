@@ -108,6 +108,10 @@ def test_gnss_failure_on_px4_detected_with_the_ulog_baseline(run):
                       f"run.speed={SPEED:g}", "fault=gps_dropout", "fault.gps_dropout.targets=[1]",
                       "fault.gps_dropout.onset_s=15", f"backend.sitl.first_instance={FIRST}", name="px4gnss")
     assert manifest["status"] == "ok", manifest["reason"] or manifest["traceback"]
+    # PX4's position failsafe takes the vehicle out of OFFBOARD: drone 1 aborts, and says why
+    assert "drone 1 landed and disarmed (ABORT: autopilot took over: left OFFBOARD" in manifest["reason"], \
+        manifest["reason"]
+    assert "(Failsafe activated)" in manifest["reason"], manifest["reason"]
     ev = table(d, "drone_1", "events")
     accepted = ev[(ev["kind"] == "fault") & (ev["name"] == "inject_accepted")]
     assert len(accepted) and 15.0 <= accepted["t_s"].iloc[0] < 16.0, ev[ev["kind"] == "fault"]

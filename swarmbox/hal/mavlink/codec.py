@@ -185,6 +185,8 @@ class CommandAckMsg(NamedTuple):
 class StatusTextMsg(NamedTuple):
     severity: int
     text: str
+    line_id: int = 0         # non-zero: one chunk of a longer line (hal/mavlink/statustext.py)
+    chunk_seq: int = 0
 
 
 class GroundTruthMsg(NamedTuple):
@@ -239,7 +241,7 @@ def _sys_status(m: Any) -> SysStatusMsg:
 
 def _statustext(m: Any) -> StatusTextMsg:
     text = m.text.decode("utf-8", "replace") if isinstance(m.text, bytes) else str(m.text)
-    return StatusTextMsg(int(m.severity), text)
+    return StatusTextMsg(int(m.severity), text, int(getattr(m, "id", 0)), int(getattr(m, "chunk_seq", 0)))
 
 
 def _setpoint(m: Any) -> SetpointTargetMsg:

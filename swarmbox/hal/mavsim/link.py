@@ -19,6 +19,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from swarmbox.hal.mavlink.codec import MSG, PREARM_CHECK_BIT
 from swarmbox.hal.mavlink.frames import GeoFrame, deg_e7
 from swarmbox.hal.mavlink.signing import signing_timestamp
+from swarmbox.hal.mavlink.statustext import split
 
 Vec3 = tuple[float, float, float]
 BASE_MODE = (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
@@ -91,6 +92,7 @@ class VehicleEncoder:
 
     def __init__(self, system_id: int, home: GeoFrame, signing_key: bytes | None = None) -> None:
         self._mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=1)
+        self._text_id = 0
         if signing_key is not None:   # MAVLink 2 signing of everything the vehicle sends
             sign = self._mav.signing
             sign.secret_key, sign.link_id, sign.sign_outgoing = signing_key, 0, True
@@ -113,8 +115,11 @@ class VehicleEncoder:
     def command_ack(self, command: int, result: int, target: tuple[int, int]) -> bytes:
         return self._pack(self._mav.command_ack_encode(command, result, 0, 0, target[0], target[1]))
 
-    def statustext(self, severity: int, text: str) -> bytes:
-        return self._pack(self._mav.statustext_encode(severity, text.encode()[:50]))
+    def statustext(self, severity: int, text: str) -> list[bytes]:
+        """One packet, or PX4-style chunks for a line longer than 50 bytes (hal/mavlink/statustext.py)."""
+        self._text_id = self._text_id % 65535 + 1
+        return [self._pack(self._mav.statustext_encode(severity, chunk.encode(), line_id, seq))
+                for chunk, line_id, seq in split(text, self._text_id)]
 
     def _pack(self, msg: object) -> bytes:
         buf = msg.pack(self._mav)  # type: ignore[attr-defined]

@@ -204,7 +204,8 @@ class MavsimProgram:
 
     def _send_texts(self) -> None:
         for severity, text in self.commander.texts:
-            self.link.queue(self.encoder.statustext(severity, text))
+            for packet in self.encoder.statustext(severity, text):
+                self.link.queue(packet)
         self.commander.texts.clear()
 
     # ---- the loop -----------------------------------------------------------------------------

@@ -58,6 +58,7 @@ from swarmbox.hal.mavlink.failure import FailureInjector, FailureRequest
 from swarmbox.hal.mavlink.frames import VehicleFrame
 from swarmbox.hal.mavlink.link import Command, CommandTracker, VehicleLink
 from swarmbox.hal.mavlink.paramset import ParamSetter
+from swarmbox.hal.mavlink.statustext import StatusTexts
 from swarmbox.hal.px4.linkreport import LinkReport
 from swarmbox.hal.px4.params import LinkConfig
 from swarmbox.hal.safety import SafetyLimits, check_setpoint
@@ -67,7 +68,6 @@ Vec3 = tuple[float, float, float]
 Emit = Callable[[str, str, dict[str, Any]], None]
 _NAN = math.nan
 _ZERO3 = (0.0, 0.0, 0.0)
-WARNING_SEVERITY = 4          # STATUSTEXT at this severity or worse becomes an event
 STATE_GRACE_S = 0.3           # a HEARTBEAT this soon after an accepted command may predate it
 SILENCE_AFTER = 20            # unrequested packets of one id before asking PX4 to stop them
 _NOT_CRITICAL = frozenset((CMD_SET_MESSAGE_INTERVAL, CMD_REQUEST_MESSAGE, CMD_INJECT_FAILURE))
@@ -114,6 +114,7 @@ class Px4Vehicle:
         self._noted: set[tuple[str, str]] = set()
         self._silenced: dict[int, tuple[int, float, int]] = {}   # msg id -> (tries, at_s, count then)
         self._checks_s, self._odd_acks = 0.0, set()
+        self._texts = StatusTexts(self._emit)
         self._link_report = LinkReport(link, emit, cfg.stats_every_s)
         self.clock_pairs: list[tuple[float, float]] = []   # (vehicle boot s, our clock - boot) minima
         self._handlers: dict[type, Callable[[Any], None]] = {
@@ -219,6 +220,7 @@ class Px4Vehicle:
         self._params.service(now_s)
         if now_s - self._checks_s >= 1.0:
             self._checks_s = now_s
+            self._texts.service(now_s)
             self._silence_unrequested()
             self._link_report(now_s, connected=True)
 
@@ -259,9 +261,7 @@ class Px4Vehicle:
             self._set_armed(hb.armed)
         if hb.custom_mode != self._mode:
             if self._sp is not None and self._mode == MODE_OFFBOARD:
-                self._stop_offboard()
-                self._blocked = f"autopilot switched to {mode_name(hb.custom_mode)}"
-                self._emit("command", "offboard_lost", {"mode": mode_name(hb.custom_mode)})
+                self._took_over(mode_name(hb.custom_mode))
             self._set_mode(hb.custom_mode, confirmed=True)
 
     def _on_local(self, m: LocalPositionMsg) -> None:
@@ -298,8 +298,17 @@ class Px4Vehicle:
             self._cmds.on_ack(m, self._now)
 
     def _on_statustext(self, m: StatusTextMsg) -> None:
-        if m.severity <= WARNING_SEVERITY:
-            self._emit("command", "statustext", {"severity": m.severity, "text": m.text})
+        self._texts.on_chunk(m.severity, m.text, m.line_id, m.chunk_seq, self._now)
+
+    def _took_over(self, mode: str) -> None:
+        """The autopilot left OFFBOARD on its own (failsafe, pilot): the drone aborts, and the reason names
+        the autopilot's alert if one came just before (PX4 says "Failsafe activated")."""
+        self._stop_offboard()
+        self._blocked = f"autopilot switched to {mode}"
+        self._emit("command", "offboard_lost", {"mode": mode})
+        alert = self._texts.recent_alert(self._now)
+        self.failure = f"autopilot took over: left OFFBOARD for {mode}" + (f" ({alert})" if alert else "")
+        self._emit("failure", "autopilot_took_over", {"mode": mode, "alert": alert, "reason": self.failure})
 
     def _on_truth(self, m: GroundTruthMsg) -> None:
         self._true, self._tel = self._frame.geodetic_to_mission(m.lat_deg, m.lon_deg, m.alt_m), None

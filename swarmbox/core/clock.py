@@ -77,13 +77,14 @@ class NodeClock:
         return (self._scale - 1.0) * 1e6
 
 
-def readings(clocks: Sequence[NodeClock], true_t_s: float) -> np.ndarray:
+def readings(clocks: Sequence[NodeClock], true_t_s: float, out: np.ndarray | None = None) -> np.ndarray:
     """Every clock's :meth:`NodeClock.now` at true time ``true_t_s``, in one numpy expression (the
-    same arithmetic, so the same values)."""
+    same arithmetic, so the same values); written into ``out`` when given."""
     n = len(clocks)
     scale = np.fromiter(map(_SCALE, clocks), dtype=np.float64, count=n)
     offset = np.fromiter(map(_OFFSET, clocks), dtype=np.float64, count=n)
-    return true_t_s * scale + offset
+    np.multiply(scale, true_t_s, out=scale)
+    return np.add(scale, offset, out=out)
 
 
 _SCALE, _OFFSET = attrgetter("_scale"), attrgetter("_offset_s")

@@ -2,8 +2,9 @@
 
 An agent used to log its own state row: a 20-field tuple per drone and tick, built from its
 telemetry tuples and converted back to columns by the log writer. When the backend can export its
-fleet arrays (``state_columns``), :class:`FleetStateLog` writes the same rows for every agent that
-ticked as one block of numpy columns instead: the numbers come straight from the backend's arrays,
+fleet arrays (``state_into``), :class:`FleetStateLog` writes the same rows for every agent that
+ticked as one block of numpy columns instead: the numbers come straight from the backend's arrays
+into the recorder's column buffers,
 and only what lives on the agent (its clock reading, stage, armed flag and mode as of its tick's
 telemetry) is gathered per agent. The rows' values and meaning are the same as an agent's own.
 """
@@ -18,15 +19,16 @@ import numpy as np
 
 from swarmbox.core.agent import MODE_TEXT
 from swarmbox.core.clock import readings
+from swarmbox.record.blocks import StateBlocks
 
 _TELEMETRY, _STAGE = attrgetter("telemetry"), attrgetter("stage")
 _ARMED, _MODE = attrgetter("armed"), attrgetter("mode")
 
 
 class FleetArrays(Protocol):
-    """A backend that can export its fleet state (:meth:`SimBackend.state_columns`)."""
+    """A backend that can export its fleet state (:meth:`SimBackend.state_into`)."""
 
-    def state_columns(self, index: np.ndarray | None = None) -> list[np.ndarray]: ...
+    def state_into(self, values: np.ndarray, landed: np.ndarray, index: np.ndarray | None = None) -> None: ...
 
 
 class StateSink(Protocol):
@@ -34,12 +36,18 @@ class StateSink(Protocol):
 
 
 class FleetStateLog:
-    """Called by the tick loop after every agent ticked, before the backend steps."""
+    """Called by the tick loop after every agent ticked, before the backend steps.
+
+    With a sink that exposes its column buffers (``state_blocks``, a
+    :class:`~swarmbox.record.blocks.StateBlocks`) a tick's rows are written straight into them, one
+    numpy call per column; otherwise they go to ``state_block`` as one block of columns.
+    """
 
     def __init__(self, agents: Sequence[Any], backend: FleetArrays, sink: StateSink,
                  every_ticks: int) -> None:
         self.agents, self.backend, self.sink = list(agents), backend, sink
         self.every = every_ticks
+        self._blocks: StateBlocks | None = getattr(sink, "state_blocks", None)
         for agent in self.agents:
             agent.own_state_rows = False   # this log writes them
         self.refresh()
@@ -61,13 +69,19 @@ class FleetStateLog:
         n = len(live)
         if not n:
             return
+        blocks = self._blocks
+        if blocks is None:
+            blocks = StateBlocks(n)
+        a, b = blocks.reserve(n)
+        cols = blocks.columns
+        blocks.nodes[a:b] = self._nodes
         # attribute reads through map/attrgetter: the loops run in C
         tels = list(map(_TELEMETRY, live))
-        t_s = readings(self._clocks, self._time.t_s)
-        stage = np.fromiter(map(int, map(_STAGE, live)), dtype=np.int8, count=n)
-        armed = np.fromiter(map(_ARMED, tels), dtype=bool, count=n)
-        mode = np.array(list(map(MODE_TEXT.__getitem__, map(_MODE, tels))), dtype=object)
-        nums = self.backend.state_columns(self._index)
-        landed = nums.pop()
-        self.sink.state_block(self._nodes, [t_s, np.full(n, tick, dtype=np.int64), stage, armed, landed,
-                                            mode, *nums])
+        readings(self._clocks, self._time.t_s, out=cols[0][a:b])
+        cols[1][a:b] = tick
+        cols[2][a:b] = list(map(_STAGE, live))
+        cols[3][a:b] = list(map(_ARMED, tels))
+        cols[5][a:b] = list(map(MODE_TEXT.__getitem__, map(_MODE, tels)))
+        self.backend.state_into(blocks.values[:, a:b], cols[4][a:b], self._index)
+        if self._blocks is None:
+            self.sink.state_block(blocks.nodes[a:b], [c[a:b] for c in cols])

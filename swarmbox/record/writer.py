@@ -151,6 +151,11 @@ class Recorder:
     def pending_rows(self) -> int:
         return sum(log.pending_rows() for log in self.logs.values()) + self._blocks.rows
 
+    @property
+    def state_blocks(self) -> StateBlocks:
+        """The state rows' column buffers (``record.fleet.FleetStateLog`` writes straight into them)."""
+        return self._blocks
+
     def state_block(self, nodes: np.ndarray, columns: list) -> None:
         """State rows of many drones at once: ``nodes`` and one array per column (schema order)."""
         self._blocks.add(nodes, columns)

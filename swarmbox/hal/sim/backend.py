@@ -14,6 +14,7 @@ import math
 from collections.abc import Mapping, Sequence
 from functools import partial
 from itertools import repeat
+from operator import attrgetter
 from typing import Any
 
 import numpy as np
@@ -30,6 +31,7 @@ from swarmbox.hal.vehicle import VehicleEvent
 __all__ = ["SimBackend", "SimParams", "SimVehicle"]
 
 _new_telemetry = partial(tuple.__new__, Telemetry)   # Telemetry(*fields), all 13 given
+_ARMED, _MODE = attrgetter("armed"), attrgetter("mode")
 
 
 def _check_homes(homes_ned_m: Sequence[Sequence[float]]) -> np.ndarray:
@@ -88,6 +90,11 @@ class SimBackend:
         self._dt_s, self._substeps, self._t0_s, self._k = -1.0, 1, 0.0, 0
         self._vert_k = (np.zeros(()), np.zeros(()))
         self._tel: list[Telemetry] | None = None   # every vehicle's, built once per step on demand
+        self._battery, self._battery_ok = np.zeros(n), False   # battery fractions, once per step
+        self._n_fixes = 0                                         # GNSS fixes taken (the cache key)
+        self._fix_key: tuple = ()                                 # ... of the lists below
+        self._fix_lists: tuple[list, list, list] = ([], [], [])   # fix tuples, seq, ready: change
+        #                                                           only with a fix, a crash, est_init_s
         self._supervised: set[int] = set()
         self._closed = False
         self.vehicles = [SimVehicle(self, i, (h[0], h[1], h[2]), ctrl=self.ctrl, params=p, limits=limits)
@@ -178,7 +185,7 @@ class SimBackend:
         self._air_s += self._tmp
         if self._supervised:
             self._supervise()
-        self._tel = None
+        self._tel, self._battery_ok = None, False
 
     def drain_events(self) -> list[VehicleEvent]:
         out, self._events = self._events, []
@@ -234,6 +241,7 @@ class SimBackend:
         return bool(self.airborne[i] == 0.0)
 
     def _gnss_fix(self) -> None:
+        self._n_fixes += 1
         for i, count, jump_m in self._gnss.fix(self.t_s, self._pos):
             self.emit(i, "estimator", "position_reset", {"count": count, "jump_m": jump_m})
 
@@ -281,44 +289,73 @@ class SimBackend:
     def _build_telemetry(self) -> list[Telemetry]:
         """Every vehicle's telemetry from the fleet arrays in one pass: the vectors are made by
         ``zip`` and the records by ``tuple.__new__``, both in C (a NamedTuple's own constructor
-        is Python code)."""
-        g = self._gnss
-        battery = np.clip(1.0 - self._air_s / self.params.battery_endurance_s, 0.0, 1.0)
-        seq = g.seq.tolist()
-        fixes = zip(*g.fix_ned_m.tolist(), strict=True)
-        if not all(seq):
-            fixes = [f if s else None for f, s in zip(fixes, seq, strict=True)]
+        is Python code). The GNSS fields and the ready flags change only with a fix, a crash or
+        the end of the estimator's start-up, so they are rebuilt only then."""
         t, vehicles, n = self.t_s, self.vehicles, self.n
+        fixes, seq, ready = self._gnss_lists(t)
         self._tel = list(map(_new_telemetry, zip(
             repeat(t, n), zip(*self._est.tolist(), strict=True), zip(*self._vel.tolist(), strict=True),
-            self.ctrl.yaw_rad.tolist(), fixes, seq, [v.armed for v in vehicles],
-            (self.airborne == 0.0).tolist(), [v.mode for v in vehicles], battery.tolist(),
-            (g.ready(t) & ~self._crashed).tolist(), zip(*self._pos.tolist(), strict=True), repeat(True, n),
+            self.ctrl.yaw_rad.tolist(), fixes, seq, list(map(_ARMED, vehicles)),
+            (self.airborne == 0.0).tolist(), list(map(_MODE, vehicles)), self.battery_frac().tolist(),
+            ready, zip(*self._pos.tolist(), strict=True), repeat(True, n),
             strict=False)))   # the repeats are as long as the fleet
         return self._tel
+
+    def _gnss_lists(self, t_s: float) -> tuple[list, list, list]:
+        """Per vehicle: latest fix (None before the first), fix count, ready flag — cached."""
+        g = self._gnss
+        key = (self._n_fixes, t_s >= self.params.est_init_s, int(np.count_nonzero(self._crashed)))
+        if key != self._fix_key:
+            seq = g.seq.tolist()
+            fixes = list(zip(*g.fix_ned_m.tolist(), strict=True))
+            if not all(seq):
+                fixes = [f if s else None for f, s in zip(fixes, seq, strict=True)]
+            self._fix_lists = (fixes, seq, (g.ready(t_s) & ~self._crashed).tolist())
+            self._fix_key = key
+        return self._fix_lists
+
+    def battery_frac(self) -> np.ndarray:
+        """Every vehicle's battery fraction now (computed once per step; do not modify)."""
+        if not self._battery_ok:
+            b = self._battery
+            np.divide(self._air_s, self.params.battery_endurance_s, out=b)
+            np.subtract(1.0, b, out=b)
+            np.maximum(b, 0.0, out=b)   # = np.clip(b, 0, 1): b is finite
+            np.minimum(b, 1.0, out=b)
+            self._battery_ok = True
+        return self._battery
 
     # ---- fleet state export (the recorder's columnar state rows) --------------------------------
     def state_columns(self, index: np.ndarray | None = None) -> list[np.ndarray]:
         """The numeric columns of the ``state`` log rows of vehicles ``index`` (None: all, in order),
         as telemetry reports them now: estimated position and velocity, latest GNSS fix (NaN before
-        the first), true position (each n, e, d), yaw, battery fraction, landed. Copies, made in a
-        few numpy calls; a crashed vehicle's values are its frozen telemetry's."""
+        the first), true position (each n, e, d), yaw, battery fraction, landed. Copies (see
+        :meth:`state_into`)."""
+        n = self.n if index is None else len(index)
+        values, landed = np.empty((14, n)), np.empty(n, dtype=bool)
+        self.state_into(values, landed, index)
+        return [*values, landed]
+
+    def state_into(self, values: np.ndarray, landed: np.ndarray, index: np.ndarray | None = None) -> None:
+        """Write the ``state`` columns of vehicles ``index`` (None: all, in order) into ``values``
+        (14, n) — position, velocity, GNSS fix, true position (each n, e, d), yaw, battery — and
+        ``landed`` (n,), in a few numpy calls; a crashed vehicle's values are its frozen telemetry's."""
         g = self._gnss
-        vectors = np.concatenate((self._est, self._vel, g.fix_ned_m, self._pos))   # (12, N), a copy
-        battery = np.clip(1.0 - self._air_s / self.params.battery_endurance_s, 0.0, 1.0)
-        landed = self.airborne == 0.0
-        yaw = self.ctrl.yaw_rad.copy()
-        if index is not None:
-            vectors, yaw, battery, landed = vectors[:, index], yaw[index], battery[index], landed[index]
-        cols = [*vectors, yaw, battery, landed]
+        if index is None:
+            np.concatenate((self._est, self._vel, g.fix_ned_m, self._pos), out=values[:12])
+            np.copyto(values[12], self.ctrl.yaw_rad)
+            np.copyto(values[13], self.battery_frac())
+            np.equal(self.airborne, 0.0, out=landed)
+        else:
+            values[:12] = np.concatenate((self._est, self._vel, g.fix_ned_m, self._pos))[:, index]
+            values[12], values[13] = self.ctrl.yaw_rad[index], self.battery_frac()[index]
+            landed[:] = self.airborne[index] == 0.0
         if self._n_crashed:
             crashed = self._crash_seen if index is None else self._crash_seen[index]
             for j in np.flatnonzero(crashed).tolist():
                 tel = self.vehicles[j if index is None else int(index[j])].frozen
                 if tel is not None:
                     fix = tel.gnss_ned_m or (math.nan,) * 3
-                    values = (*tel.pos_ned_m, *tel.vel_ned_m_s, *fix, *tel.true_pos_ned_m, tel.yaw_rad,
-                              tel.battery_frac, tel.landed)
-                    for col, value in zip(cols, values, strict=True):
-                        col[j] = value
-        return cols
+                    values[:, j] = (*tel.pos_ned_m, *tel.vel_ned_m_s, *fix, *tel.true_pos_ned_m, tel.yaw_rad,
+                                    tel.battery_frac)
+                    landed[j] = tel.landed

@@ -4,8 +4,10 @@ The plane is the north–east plane: pymunk x = north, y = east (:func:`ned_xy` 
 knows it). Bodies never rotate (infinite moment), so pymunk's handedness is irrelevant. Linear drag
 is pymunk's velocity damping: ``v *= exp(-drag/mass · dt)`` per step, exact for any step length.
 
-State goes in and out through :mod:`pymunk.batch` in one call each way, so a tick costs a fixed
-handful of C calls whatever the fleet size. Contacts between two drones are processed only when their
+State goes in and out through pymunk's batch iterators (:mod:`pymunk.batch`) in one C call each way,
+so a tick costs a fixed handful of C calls whatever the fleet size. The iterator calls are prepared
+once (:class:`_BatchCall`): ``pymunk.batch``'s wrappers build a new descriptor on every call, which
+cost more than the iteration itself at a few drones. Contacts between two drones are processed only when their
 altitude gap is within ``vertical_separation_m`` and not both are on the ground; each contact that
 starts being processed is reported once through ``emit``.
 """
@@ -26,6 +28,7 @@ DRONE, OBSTACLE = 1, 2
 _GET = pb.BodyFields.POSITION | pb.BodyFields.VELOCITY
 _SET = pb.BodyFields.VELOCITY | pb.BodyFields.FORCE
 _SET_FORCE = pb.BodyFields.FORCE
+_GETTER, _SETTER = "pmSpaceBodyGetIteratorFuncBatched", "pmSpaceBodySetIteratorFuncBatched"
 
 #: emit(drone_id, name, data): report a collision that began.
 Emit = Callable[[int, str, dict[str, Any]], None]
@@ -85,8 +88,12 @@ class PlaneWorld:
         self._force_buf.set_float_buf(self._force_arr)
         self.cmd_vel_xy = self._set_arr[:self.n, 0:2].T
         self.cmd_force_xy = self._set_arr[:self.n, 2:4].T
-        self._get_buf.clear()
-        pb.get_space_bodies(self.space, _GET, self._get_buf)
+        self._get = _BatchCall(self.space, _GET, self._get_buf, _GETTER)
+        self._set = _BatchCall(self.space, _SET, self._set_buf, _SETTER)
+        self._set_force = _BatchCall(self.space, _SET_FORCE, self._force_buf, _SETTER)
+        self._get_num = self._get_buf._float_arr   # the getter's fill count, reset before each read
+        self._get_num.num = 0
+        self._get()
         if np.frombuffer(self._get_buf.float_buf()).ctypes.data != self._get_arr.ctypes.data:
             raise RuntimeError("pymunk batch buffer was reallocated")
 
@@ -111,20 +118,20 @@ class PlaneWorld:
     # ---- per tick ------------------------------------------------------------------------------
     def read(self, pos_ned_m: np.ndarray, vel_ned_m_s: np.ndarray) -> None:
         """Copy the bodies' plane positions and velocities into axis-first NED arrays (3, N)."""
-        self._get_buf.clear()
-        pb.get_space_bodies(self.space, _GET, self._get_buf)
+        self._get_num.num = 0
+        self._get()
         np.copyto(ned_xy(pos_ned_m), self._raw_pos)
         np.copyto(ned_xy(vel_ned_m_s), self._raw_vel)
 
     def step(self, dt_s: float, substeps: int) -> None:
         """Apply the commanded velocities and forces, then advance the space by ``dt_s``."""
-        pb.set_space_bodies(self.space, _SET, self._set_buf)
+        self._set()
         h = dt_s / substeps
         self.space.step(h)
         if substeps > 1:   # pymunk clears forces after every step: re-apply them
             self._force_arr[:self.n] = self._set_arr[:self.n, 2:4]
             for _ in range(substeps - 1):
-                pb.set_space_bodies(self.space, _SET_FORCE, self._force_buf)
+                self._set_force()
                 self.space.step(h)
 
     # ---- contacts ------------------------------------------------------------------------------
@@ -166,6 +173,36 @@ class PlaneWorld:
             self._touching.discard((min(i, j), max(i, j)))
         elif sb in self._obstacle_of:
             self._touching.discard((i, -1 - self._obstacle_of[sb][0]))
+
+
+class _BatchCall:
+    """One prepared pymunk batch iteration over every body of a space: what
+    ``pymunk.batch.get_space_bodies`` / ``set_space_bodies`` do, with the descriptor built once.
+
+    A setter reads its buffer from the start (``num = 0``) and leaves ``num`` as it was, as
+    ``set_space_bodies`` does; a getter appends at ``num`` (the caller resets it).
+    """
+
+    __slots__ = ("_call", "_args", "_arr", "_setter")
+
+    def __init__(self, space: pymunk.Space, fields: pb.BodyFields, buf: pb.Buffer, func: str) -> None:
+        data = pb.ffi.new("pmBatchedData *")
+        data.fields = fields.value
+        data.floatArray, data.intArray = buf._float_arr, buf._int_arr
+        self._call = pb.lib.cpSpaceEachBody
+        self._args = (space._space, pb.ffi.addressof(pb.lib, func), data, buf)   # buf: kept alive
+        self._arr = buf._float_arr
+        self._setter = func == _SETTER
+
+    def __call__(self) -> None:
+        space, func, data, _ = self._args
+        if self._setter:
+            arr = self._arr
+            num, arr.num = arr.num, 0
+            self._call(space, func, data)
+            arr.num = num
+        else:
+            self._call(space, func, data)
 
 
 def _obstacle_shape(static: pymunk.Body, k: int, spec: Mapping[str, Any]) -> pymunk.Shape:

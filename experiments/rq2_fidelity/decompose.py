@@ -58,9 +58,14 @@ def _clock(flights: list[pd.DataFrame]) -> np.ndarray:
 def lti_fit(sp_flight: pd.DataFrame, target: np.ndarray, rel: np.ndarray) -> np.ndarray:
     """The best FIR (FIR_S long) + constant response to ``sp_flight``'s setpoint, fitted to ``target``."""
     taps = round(FIR_S / F.RESAMPLE_S)
-    x = np.array([_z(sp_flight, rel, "sp", k * F.RESAMPLE_S) for k in range(taps)] + [np.ones(len(rel))]).T
-    h, *_ = np.linalg.lstsq(x, target, rcond=None)
-    return x @ h
+    wide = _z(sp_flight, np.concatenate([rel[0] - F.RESAMPLE_S * np.arange(taps - 1, 0, -1), rel]), "sp")
+    x = np.array([wide[taps - 1 - k: taps - 1 - k + len(rel)] for k in range(taps)] + [np.ones(len(rel))]).T
+    # normal equations with a tiny ridge (einsum, and a 41x41 solve: multi-threaded BLAS lstsq on
+    # this small problem stalls for seconds on a loaded machine)
+    gram = np.einsum("ti,tj->ij", x.conj(), x)
+    gram += 1e-9 * np.trace(gram).real / len(gram) * np.eye(len(gram))
+    h = np.linalg.solve(gram, np.einsum("ti,t->i", x.conj(), target))
+    return np.einsum("ti,i->t", x, h)
 
 
 def bounds(px4: dict[str, dict[int, pd.DataFrame]], drone: int) -> dict[str, float]:

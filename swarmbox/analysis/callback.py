@@ -32,9 +32,17 @@ class AnalyzeSweepCallback(Callback):
     """Runs the sweep analysis on ``config.hydra.sweep.dir`` in ``on_multirun_end``."""
 
     def __init__(self, group_by: Sequence[str] = ("algo",), n_boot: int = 2000, seed: int = 0,
-                 figures: bool = True) -> None:
+                 figures: bool = True, workers: int | None = None) -> None:
         self.group_by, self.n_boot, self.seed = tuple(group_by), n_boot, seed
-        self.figures = figures
+        self.figures, self.workers = figures, workers
+
+    def _workers(self) -> int:
+        """Every core unless told otherwise. Not ``default_workers``' idle-core guess: the 1-minute load
+        average still counts the sweep's own runs, which have just finished (after a 2-core sweep it
+        reads about 2, and the analysis would run on one core)."""
+        if self.workers:
+            return self.workers
+        return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         if os.environ.get("SWARMBOX_INTERRUPTED"):   # set by swarmbox.run on SIGINT / SIGTERM
@@ -47,7 +55,8 @@ class AnalyzeSweepCallback(Callback):
 
             options = SweepOptions(group_by=self.group_by, n_boot=self.n_boot, seed=self.seed)
             sweep_dir = Path(str(config.hydra.sweep.dir))
-            result = analyze_sweep(sweep_dir, options, progress=Reporter("sweep analysis"))
+            result = analyze_sweep(sweep_dir, options, workers=self._workers(),
+                                   progress=Reporter("sweep analysis"))
             write_sweep(result, sweep_dir, with_figures=self.figures)
             for row in result.problems.itertuples(index=False):
                 log.warning("%s: %s: %s", row.severity, row.run, row.problem)

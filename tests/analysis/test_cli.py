@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
@@ -151,6 +152,12 @@ def test_callback_analyzes_the_sweep_and_never_raises(sweep_dir, tmp_path, caplo
     assert (root / "tables" / "summary.csv").is_file()
     callback.on_multirun_end(OmegaConf.create({"hydra": {}}))    # no sweep dir: logged, not raised
     assert "sweep analysis failed" in caplog.text
+
+
+def test_callback_uses_every_core_whatever_the_load_the_sweep_left(monkeypatch):
+    monkeypatch.setattr(os, "getloadavg", lambda: (2.0, 2.0, 2.0))   # a 2-core sweep just ended
+    assert AnalyzeSweepCallback()._workers() == len(os.sched_getaffinity(0))
+    assert AnalyzeSweepCallback(workers=1)._workers() == 1
 
 
 def _analyze(*args: str) -> subprocess.CompletedProcess:

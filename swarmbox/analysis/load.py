@@ -117,10 +117,15 @@ def read_manifest(run_dir: Path) -> dict[str, Any]:
     return manifest
 
 
+#: libyaml's safe loader when PyYAML was built with it: ~10x faster on a run's config (a sweep reads
+#: hundreds); the same documents as yaml.safe_load
+_YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
 def read_config(run_dir: Path, problems: list[str]) -> dict[str, Any]:
     path = run_dir / "config.yaml"
     try:
-        config = yaml.safe_load(path.read_text())
+        config = yaml.load(path.read_text(), Loader=_YAML_LOADER)  # noqa: S506 - a safe loader
     except FileNotFoundError:
         problems.append("config.yaml missing")
         return {}

@@ -10,7 +10,10 @@ may differ from PX4 (``conf/backend/sim.yaml`` vs ``sim_px4.yaml``, docs/fidelit
   position loop's 1/MPC_XY_P plus what drag costs while the integrator catches up (the RQ2 lag);
 - ``mc_roll_p``: PX4's tilt follows its setpoint with time constant 1/MC_ROLL_P (0: at once);
 - ``acc_hor_max_offboard``: PX4 limits offboard setpoints by the tilt only, MPC_ACC_HOR_MAX acts in
-  its automatic modes.
+  its automatic modes;
+- ``offboard_delay_s``: an offboard position setpoint reaches PX4's position controller late (a
+  SwarmBox tick, the MAVLink hop, PX4's offboard and estimator output rates); the automatic modes
+  run on the vehicle and are not delayed.
 
 Every kind
 of target is one column of the same arrays, so one :meth:`CascadedController.update` serves the whole
@@ -75,6 +78,9 @@ class CascadedController:
         self._att_alpha = 1.0
         self._vsp, self._tmp, self._h, self._lim_h, self._lim_up = z3(), z3(), *(np.zeros(n) for _ in "abc")
         self._dt_s = -1.0
+        self._offboard = np.zeros(n, dtype=bool)   # columns whose position target comes over the link
+        self._tgt_hist: np.ndarray | None = None   # ring of past targets (offboard_delay_s > 0 only)
+        self._hist_k = 0
         self._kp_v, self._ki_dt_v, self._kd_dt_v = z3(), z3(), z3()   # gains × loop_on (× dt terms)
         self._drag_v = z3()                                           # ff × drag / mass × loop_on
         # row views, made once: slicing costs as much as a small ufunc
@@ -124,6 +130,7 @@ class CascadedController:
         """Horizontal acceleration limit: the tilt limit alone on offboard setpoints (PX4's
         PositionControl), MPC_ACC_HOR_MAX as well in the automatic modes."""
         tilt_only = offboard and not self.p.acc_hor_max_offboard
+        self._offboard[i] = offboard
         self._ah_max[i] = self.p.acc_tilt_limit_m_s2 if tilt_only else self.p.acc_hor_limit_m_s2
 
     def set_takeoff_ramp(self, i: int, up_m_s: float) -> None:
@@ -156,6 +163,10 @@ class CascadedController:
         # constant 1/MC_ROLL_P (PX4's attitude P gain; the rate loop is much faster)
         rate = self.p.mc_roll_p
         self._att_alpha = 1.0 if rate <= 0 else -math.expm1(-dt_s * rate)
+        delay_ticks = round(self.p.offboard_delay_s / dt_s)
+        if delay_ticks and (self._tgt_hist is None or len(self._tgt_hist) != delay_ticks):
+            self._tgt_hist = np.repeat(self.tgt_pos_ned_m[None], delay_ticks, axis=0)
+            self._hist_k = 0
         np.multiply(self._kp_vel, self.loop_on, out=self._kp_v)
         np.multiply(self.p.vel_drag_ff * self.p.drag_n_s_m / self.p.mass_kg, self.loop_on, out=self._drag_v)
         np.multiply(self._ki_vel * dt_s, self.loop_on, out=self._ki_dt_v)
@@ -181,7 +192,8 @@ class CascadedController:
         """Position P + velocity feed-forward, saturated horizontally and vertically, into _vsp."""
         vsp, tmp = self._vsp, self._tmp
         vn, ve, vd = self._vsp_rows
-        np.subtract(self.tgt_pos_ned_m, pos_ned_m, out=tmp)
+        np.subtract(self._delayed_target() if self._tgt_hist is not None else self.tgt_pos_ned_m,
+                    pos_ned_m, out=tmp)
         np.multiply(tmp, self.kp, out=vsp)
         vsp += self.vel_ff_ned_m_s
         _saturate_h(vn, ve, self.vmax_h_m_s, self._h)
@@ -189,6 +201,15 @@ class CascadedController:
         if self.ramping:
             np.maximum(vd, -self.tko_up_m_s, out=vd)
         np.minimum(vd, self.vmax_d_m_s, out=vd)
+
+    def _delayed_target(self) -> np.ndarray:
+        """Position targets with the offboard columns as they were offboard_delay_s ago (a ring of
+        per-tick snapshots; a column that is not offboard uses its current target)."""
+        hist, k = self._tgt_hist, self._hist_k
+        old = hist[k].copy()
+        np.copyto(hist[k], self.tgt_pos_ned_m)
+        self._hist_k = (k + 1) % len(hist)
+        return np.where(self._offboard, old, self.tgt_pos_ned_m)
 
     def _velocity_pid(self, vel_ned_m_s: np.ndarray) -> None:
         """Drag feed-forward + velocity PID (derivative on the measurement, as PX4) into acc.

@@ -171,6 +171,8 @@ class SimVehicle:
         if self._refuse("land"):
             return
         n, e, _ = self._est()
+        if self._p.land_at_stop_point:
+            n, e = self._stop_point(n, e)
         self._ctrl.set_descent(self.drone_id, n, e, self._p.mpc_land_speed_m_s)
         self._set_mode(FlightMode.LAND)
 
@@ -301,6 +303,13 @@ class SimVehicle:
 
     def _landed(self) -> bool:
         return self._fleet.on_ground(self.drone_id)
+
+    def _stop_point(self, n: float, e: float) -> tuple[float, float]:
+        """Where the vehicle would stop from its velocity, as PX4's navigator projects it for LAND
+        (``computeBrakingDistanceFromVelocity`` with accel MPC_ACC_HOR and a 0.6 s jerk delay)."""
+        vn, ve, _ = self._fleet.telemetry_of(self.drone_id).vel_ned_m_s
+        scale = math.hypot(vn, ve) / (2.0 * self._p.mpc_acc_hor_m_s2) + 0.6
+        return n + vn * scale, e + ve * scale
 
     def _est(self) -> Vec3:
         return self._fleet.estimate_ned(self.drone_id)

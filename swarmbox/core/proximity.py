@@ -16,6 +16,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from itertools import chain
 
 import numpy as np
 
@@ -129,6 +130,8 @@ def _pairs_within(view: tuple[DescendantState, ...], limit_m: float) -> list[tup
     if len(view) <= DIRECT_PAIRS_UP_TO:
         return [(a, b) for a in range(len(view)) for b in range(a + 1, len(view))
                 if math.dist(view[a].pos_ned_m, view[b].pos_ned_m) < limit_m]
-    pts = np.array([d.pos_ned_m for d in view])
-    pairs = kd_tree()(pts).query_pairs(limit_m, output_type="ndarray")
+    pts = np.fromiter(chain.from_iterable(d.pos_ned_m for d in view), float, 3 * len(view)).reshape(-1, 3)
+    # built for one query: an unbalanced, non-compact tree builds faster and finds the same pairs
+    tree = kd_tree()(pts, balanced_tree=False, compact_nodes=False)
+    pairs = tree.query_pairs(limit_m, output_type="ndarray")
     return sorted(map(tuple, pairs.tolist()))

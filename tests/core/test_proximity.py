@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 
 import numpy as np
 import pytest
@@ -115,3 +116,17 @@ def test_tracker_episodes_and_prediction():
     assert [e.pair for e in ended] == [(0, 1)] and ended[0].min_distance_m == pytest.approx(4.0)
     with pytest.raises(ValueError, match="run.proximity_m"):
         ProximityTracker(0.0)
+
+
+def test_the_kd_tree_path_finds_exactly_the_pairs_of_the_direct_check():
+    """Above ``DIRECT_PAIRS_UP_TO`` drones pairs come from a k-d tree: the same pairs, in the same order,
+    as checking every pair (clustered points, many at the limit's scale)."""
+    from swarmbox.core.proximity import DIRECT_PAIRS_UP_TO, _pairs_within
+
+    rng = np.random.default_rng(7)
+    for n in (DIRECT_PAIRS_UP_TO + 1, 80, 300):
+        pts = rng.normal(0.0, 4.0, size=(n, 3)).round(1)   # rounding makes ties at the limit likely
+        view = tuple(DescendantState(i, 3, tuple(map(float, p))) for i, p in enumerate(pts))
+        brute = [(a, b) for a, b in itertools.combinations(range(n), 2)
+                 if math.dist(view[a].pos_ned_m, view[b].pos_ned_m) < 2.0]
+        assert _pairs_within(view, 2.0) == brute

@@ -69,6 +69,7 @@ class CascadedController:
         self.vmax_d_m_s = np.full(n, p.mpc_z_vel_max_dn_m_s)
         self.tko_up_m_s = np.full(n, np.inf)   # takeoff ramp: climb-rate limit on top of vmin_d (inf: none)
         self.ramping = False                    # any column with a finite takeoff-ramp limit
+        self._ramp_ids: set[int] = set()        # ... which ones (set per drone and tick: no array scan)
         self.amax_d_m_s2 = np.full(n, p.mpc_acc_down_max_m_s2)  # gravity for thrust-off columns
         self.integ_m_s2, self._prev_vel = z3(), z3()
         self.yaw_rad, self.yaw_tgt_rad = np.zeros(n), np.zeros(n)
@@ -136,7 +137,11 @@ class CascadedController:
     def set_takeoff_ramp(self, i: int, up_m_s: float) -> None:
         """Limit drone ``i``'s climb rate to ``up_m_s`` (the takeoff ramp); ``inf`` lifts the limit."""
         self.tko_up_m_s[i] = up_m_s
-        self.ramping = bool(np.isfinite(self.tko_up_m_s).any())
+        if math.isfinite(up_m_s):
+            self._ramp_ids.add(i)
+        else:
+            self._ramp_ids.discard(i)
+        self.ramping = bool(self._ramp_ids)
 
     def reset_integrator(self, i: int) -> None:
         self.integ_m_s2[:, i] = 0.0

@@ -25,6 +25,10 @@ BROADCAST = -4
 # dst i16, type u8.
 _HEADER = 21
 _VEC3 = 12  # three float32
+# a Report's size without its data and descendants: header, stage, complete, two counts, position,
+# velocity, discrepancy, data length (folded here: Report.nbytes is asked once per drone and tick)
+_REPORT_FIXED = _HEADER + 1 + 1 + 2 + 2 + 3 * _VEC3 + 2
+_DESCENDANT_BYTES = 2 + 1 + _VEC3   # id, stage, position
 
 
 #: Task codes travel as an unsigned LEB128 varint: one byte below 128 (every shipped algorithm's
@@ -86,8 +90,7 @@ class Report(NamedTuple):
 
     @property
     def nbytes(self) -> int:
-        return (_HEADER + 1 + 1 + 2 + 2 + 3 * _VEC3 + 2 + len(self.data)
-                + len(self.descendants) * (2 + 1 + _VEC3))
+        return _REPORT_FIXED + len(self.data) + len(self.descendants) * _DESCENDANT_BYTES
 
 
 class TaskCommand(NamedTuple):

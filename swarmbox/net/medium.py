@@ -163,7 +163,7 @@ class SimMedium:
         t, tick = self._time.t_s, self._time.tick
         mtype, nbytes = MESSAGE_TYPES[type(msg)], msg.nbytes
         sender.log((sender.clock.now(), tick, "send", msg.msg_id, mtype, src, dst, nbytes, msg.t_sent_s, ""))
-        if self._plain():
+        if self._ideal and not self._links and not self.hooks:   # _plain(), inline: once per drone and tick
             receiver = self._nodes.get(dst)
             if receiver is not None and receiver.connected:   # ideal and reachable: no draw, FIFO
                 self._fifo.append((t + self._default.latency_s, tick, 0, dst, msg, mtype, nbytes))

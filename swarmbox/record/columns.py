@@ -77,6 +77,11 @@ def batch(table: str, rows: Sequence[tuple], node: np.ndarray | None = None) -> 
     schema = arrow_schema(table) if node is None else spill_schema(table)
     arrays = [_field(rows, i, f.type) for i, f in enumerate(schema) if i < len(TABLES[table])]
     if node is not None:
-        arrays.append(pa.Array.from_buffers(NODE.type, len(node),
-                                            [None, pa.py_buffer(np.ascontiguousarray(node, np.int16))]))
+        arrays.append(numbers(node, NODE.type))
     return pa.RecordBatch.from_arrays(arrays, schema=schema)
+
+
+def numbers(values: np.ndarray, typ: pa.DataType) -> pa.Array:
+    """A numeric Arrow column over a numpy array's buffer (``pa.array(ndarray)`` imports pandas)."""
+    data = np.ascontiguousarray(values, _NUMPY[typ])
+    return pa.Array.from_buffers(typ, len(data), [None, pa.py_buffer(data)])

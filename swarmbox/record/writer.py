@@ -29,7 +29,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from swarmbox.record.blocks import StateBlocks
-from swarmbox.record.columns import arrow_schema, batch, spill_schema
+from swarmbox.record.columns import NODE, arrow_schema, batch, numbers, spill_schema
 from swarmbox.record.schema import node_name
 
 GROUND_TABLES = ("messages", "stages", "events")
@@ -71,7 +71,7 @@ class _Chunk:
             return batch(self.table, self.rows, node)
         if node is None:
             return self.data
-        return pa.RecordBatch.from_arrays([*self.data.columns, pa.array(node.astype(np.int16))],
+        return pa.RecordBatch.from_arrays([*self.data.columns, numbers(node, NODE.type)],
                                           schema=spill_schema(self.table))
 
     def __len__(self) -> int:
@@ -129,10 +129,10 @@ class Recorder:
     #: the GIL while it converts) is then the same whatever the run's length.
     FLUSH_ROWS = 100_000
 
-    def __init__(self, run_dir: Path, flush_rows: int = FLUSH_ROWS, max_chunks: int = 8) -> None:
+    def __init__(self, run_dir: Path, flush_rows: int | None = None, max_chunks: int = 8) -> None:
         self.run_dir = Path(run_dir)
         self.root = self.run_dir / "logs"
-        self.flush_rows = flush_rows
+        self.flush_rows = flush_rows or self.FLUSH_ROWS
         self.logs: dict[int, NodeLog] = {}
         self._spill = _SpillWriter(self.run_dir / ".spill", max_chunks)
         self._blocks = StateBlocks()

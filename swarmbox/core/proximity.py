@@ -48,6 +48,7 @@ class ProximityTracker:
                              f"got {distance_m} and {window_s}")
         self.distance_m, self.window_s = float(distance_m), float(window_s)
         self.active: dict[Pair, Episode] = {}
+        self._near = NeighbourList()
         self._last: dict[int, tuple[float, tuple[float, float, float]]] = {}
         self._vel: dict[int, tuple[float, float, float]] = {}
 
@@ -76,7 +77,7 @@ class ProximityTracker:
             return {}
         reach = self.distance_m + self.window_s * self._max_closing_speed()
         out: dict[Pair, tuple[float, bool]] = {}
-        for a, b in _pairs_within(view, reach):
+        for a, b in self._near.pairs(view, reach):
             da, db = view[a], view[b]
             if da.drone_id == db.drone_id:   # seen directly and forwarded, during a handover
                 continue
@@ -123,6 +124,53 @@ def kd_tree() -> type:
     from scipy.spatial import cKDTree
 
     return cKDTree
+
+
+class NeighbourList:
+    """Candidate pairs for ``_pairs_within`` that stay valid while the swarm moves little (a Verlet list).
+
+    A rebuild finds every pair within ``limit + 2 * SKIN_M`` of the current positions (k-d tree).
+    Until some drone has moved more than ``SKIN_M`` from where it was then, no other pair can have come
+    within ``limit``, so each tick only measures the stored candidates. The pairs returned are those
+    of ``_pairs_within`` (a margin of rounding wider): the caller re-checks each with exact distances.
+    Small swarms (up to ``DIRECT_PAIRS_UP_TO``) are checked directly every tick.
+    """
+
+    SKIN_M = 1.0
+
+    def __init__(self) -> None:
+        self._ids: tuple[int, ...] = ()
+        self._origin = np.empty((0, 3))
+        self._radius = -1.0
+        self._cand = (np.empty(0, np.intp), np.empty(0, np.intp))
+
+    def pairs(self, view: tuple[DescendantState, ...], limit_m: float) -> list[tuple[int, int]]:
+        n = len(view)
+        if n <= DIRECT_PAIRS_UP_TO:
+            return _pairs_within(view, limit_m)
+        pts = np.fromiter(chain.from_iterable(d.pos_ned_m for d in view), float, 3 * n).reshape(-1, 3)
+        ids = tuple(d.drone_id for d in view)
+        if ids != self._ids or not self._valid(pts, limit_m):
+            self._rebuild(pts, ids, limit_m)
+        a, b = self._cand
+        if not len(a):
+            return []
+        gap = pts[a] - pts[b]
+        near = np.einsum("ij,ij->i", gap, gap) <= (limit_m * (1 + 1e-9) + 1e-9) ** 2
+        return list(zip(a[near].tolist(), b[near].tolist(), strict=True))
+
+    def _valid(self, pts: np.ndarray, limit_m: float) -> bool:
+        moved = pts - self._origin
+        most = float(np.sqrt(np.einsum("ij,ij->i", moved, moved).max()))
+        return limit_m + 2.0 * most <= self._radius
+
+    def _rebuild(self, pts: np.ndarray, ids: tuple[int, ...], limit_m: float) -> None:
+        self._ids, self._origin = ids, pts
+        self._radius = limit_m + 2.0 * self.SKIN_M
+        tree = kd_tree()(pts, balanced_tree=False, compact_nodes=False)
+        found = tree.query_pairs(self._radius, output_type="ndarray")
+        found = found[np.lexsort((found[:, 1], found[:, 0]))] if len(found) else found.reshape(0, 2)
+        self._cand = (found[:, 0].astype(np.intp), found[:, 1].astype(np.intp))
 
 
 def _pairs_within(view: tuple[DescendantState, ...], limit_m: float) -> list[tuple[int, int]]:

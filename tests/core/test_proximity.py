@@ -130,3 +130,56 @@ def test_the_kd_tree_path_finds_exactly_the_pairs_of_the_direct_check():
         brute = [(a, b) for a, b in itertools.combinations(range(n), 2)
                  if math.dist(view[a].pos_ned_m, view[b].pos_ned_m) < 2.0]
         assert _pairs_within(view, 2.0) == brute
+
+
+def _brute(view, limit_m):
+    return [(a, b) for a, b in itertools.combinations(range(len(view)), 2)
+            if math.dist(view[a].pos_ned_m, view[b].pos_ned_m) < limit_m]
+
+
+def test_the_neighbour_list_finds_the_pairs_of_the_direct_check_while_the_swarm_moves():
+    """Candidates kept between rebuilds: every tick the same pairs as checking every pair, while drones
+    drift, one darts across the swarm (forcing rebuilds), the limit changes and a drone drops out."""
+    from swarmbox.core.proximity import NeighbourList
+
+    rng = np.random.default_rng(11)
+    near = NeighbourList()
+    n = 90
+    pos = rng.uniform(-12.0, 12.0, size=(n, 3))
+    ids = list(range(n))
+    rebuilds = 0
+    for tick in range(300):
+        pos += rng.normal(0.0, 0.04, size=pos.shape)
+        pos[0] = (-15.0 + 0.2 * tick, 0.0, 0.0)   # sweeps through the whole swarm
+        if tick == 150:
+            del ids[17]
+        limit = 2.0 + 0.5 * math.sin(tick / 20.0)
+        view = tuple(DescendantState(i, 3, tuple(map(float, pos[i]))) for i in ids)
+        before = near._radius, near._ids
+        got = near.pairs(view, limit)
+        rebuilds += (near._radius, near._ids) != before
+        assert got == _brute(view, limit), tick
+    assert 10 < rebuilds < 200   # candidates were reused, and rebuilt when drones moved
+
+
+def test_a_tracker_on_the_neighbour_list_alerts_exactly_as_one_checking_every_pair(monkeypatch):
+    from swarmbox.core import proximity
+
+    rng = np.random.default_rng(3)
+    n, frames = 60, []
+    pos, vel = rng.uniform(-10.0, 10.0, size=(n, 3)), rng.normal(0.0, 1.5, size=(n, 3))
+    for _ in range(120):
+        pos = pos + 0.025 * vel
+        frames.append(tuple(DescendantState(i, 3, tuple(map(float, p))) for i, p in enumerate(pos)))
+
+    def replay(tracker):
+        out = []
+        for k, view in enumerate(frames):
+            pairs, started, ended = tracker.update(0.025 * k, view)
+            out.append((pairs, [e.pair for e in started], [(e.pair, e.min_distance_m) for e in ended]))
+        return out
+
+    fast = replay(proximity.ProximityTracker(1.5, window_s=1.0))
+    monkeypatch.setattr(proximity.NeighbourList, "pairs", lambda self, view, limit: _brute(view, limit))
+    assert fast == replay(proximity.ProximityTracker(1.5, window_s=1.0))
+    assert sum(len(p) for p, _, _ in fast) > 50   # the swarm did produce alerts

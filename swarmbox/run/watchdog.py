@@ -1,26 +1,28 @@
 """A wall-clock limit on every call of a user hook: a hook that never returns fails the run, named.
 
-The watchdog wraps the dispatch methods the core calls on an algorithm instance (``run_stage``,
-``enter_stage``, ``on_task``, ``on_report``, ``successors``), so the core is unchanged. Each call
-stamps its start; a daemon thread checks the stamp and, past ``limit_s``, sends SIGALRM to the main
-thread, whose handler raises :class:`HookTimeout` inside the hook. A signal interrupts ``sleep``
-and pure-Python loops alike. The exception is a BaseException, so a hook's own ``except Exception``
-cannot swallow it. Signals reach only the main thread: elsewhere the watchdog stays off.
-
-Cost per hook call: one closure call, two attribute stores and a ``time.monotonic()`` (no syscall).
+Nothing is added to a hook call. A daemon thread looks at the main thread's stack a few times per
+limit (``sys._current_frames``) for the innermost frame of a dispatch method (``run_stage``,
+``enter_stage``, ``on_task``, ``on_report``, ``successors``) running on a guarded algorithm. When
+the same frame is still there ``limit_s`` after it was first seen, the thread sends SIGALRM to the
+main thread, whose handler raises :class:`HookTimeout` inside the hook — if that frame is still on
+its stack. A signal interrupts ``sleep`` and pure-Python loops alike. The exception is a
+BaseException, so a hook's own ``except Exception`` cannot swallow it. Signals reach only the main
+thread: elsewhere the watchdog stays off. A hook is stopped between ``limit_s`` and ``limit_s`` plus
+two polls (a quarter of the limit, at most 0.25 s each) after it started.
 """
 
 from __future__ import annotations
 
 import signal
+import sys
 import threading
 import time
-from collections.abc import Callable
+from types import FrameType
 from typing import Any
 
 from swarmbox.core.stages import Stage
 
-HOOKS = ("run_stage", "enter_stage", "on_task", "on_report", "successors")
+HOOKS = frozenset({"run_stage", "enter_stage", "on_task", "on_report", "successors"})
 _LOOP = {Stage.PREPARATION: "prep_loop/prep_complete", Stage.EXECUTION: "exec_loop/exec_complete"}
 
 
@@ -42,8 +44,10 @@ class HookWatchdog:
 
     def __init__(self, limit_s: float) -> None:
         self.limit_s = float(limit_s)
-        self._call: tuple[str, str, tuple] | None = None   # (who, method, args) of the running hook
-        self._since = 0.0
+        self._who: dict[int, str] = {}   # id(algorithm) -> "drone 3" / "ground"
+        self._guarded: list[Any] = []    # keeps every id above taken by its algorithm
+        self._overdue: FrameType | None = None   # the hook frame the alarm is about
+        self._message = ""
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._old_handler: Any = None
@@ -54,21 +58,9 @@ class HookWatchdog:
         return self._thread is not None
 
     def guard(self, algorithm: Any, who: str) -> None:
-        """Wrap ``algorithm``'s dispatch methods (instance attributes shadow the class's)."""
-        for name in HOOKS:
-            method = getattr(algorithm, name, None)
-            if method is not None:
-                setattr(algorithm, name, self._wrap(method, who, name))
-
-    def _wrap(self, fn: Callable, who: str, name: str) -> Callable:
-        def guarded(*args: Any) -> Any:
-            outer = self._call
-            self._call, self._since = (who, name, args), time.monotonic()
-            try:
-                return fn(*args)
-            finally:
-                self._call = outer
-        return guarded
+        """Watch the hooks of ``algorithm``, naming it ``who`` in the error."""
+        self._who[id(algorithm)] = who
+        self._guarded.append(algorithm)
 
     def start(self) -> bool:
         """Arm the watchdog; returns False (and stays off) outside the main thread."""
@@ -85,25 +77,41 @@ class HookWatchdog:
             self._thread.join()
             self._thread = None
             signal.signal(signal.SIGALRM, self._old_handler or signal.SIG_DFL)
+        self._overdue = None
 
-    def _overdue(self) -> tuple[str, str, tuple] | None:
-        call = self._call
-        if call is not None and time.monotonic() - self._since >= self.limit_s:
-            return call
+    def running_hook(self, frame: FrameType | None) -> tuple[FrameType, str] | None:
+        """The innermost guarded hook call on the stack ending in ``frame``, with its error text."""
+        while frame is not None:
+            code = frame.f_code
+            if code.co_name in HOOKS and code.co_argcount:
+                local = frame.f_locals
+                who = self._who.get(id(local.get(code.co_varnames[0])))
+                if who is not None:
+                    args = tuple(local.get(name) for name in code.co_varnames[1:code.co_argcount])
+                    return frame, (f"{who}: {hook_label(code.co_name, args)} did not return within "
+                                   f"{self.limit_s:g} s (run.hook_timeout_s)")
+            frame = frame.f_back
         return None
 
     def _watch(self) -> None:
         poll = min(0.25, self.limit_s / 4)
+        seen: FrameType | None = None
+        since = 0.0
         while not self._stop.wait(poll):
-            if self._overdue() is not None:
+            hook = self.running_hook(sys._current_frames().get(self._main_id))
+            if hook is None or hook[0] is not seen:   # holding `seen` keeps its identity unique
+                seen, since = (None, 0.0) if hook is None else (hook[0], time.monotonic())
+                continue
+            if time.monotonic() - since >= self.limit_s:
+                self._overdue, self._message = hook
                 signal.pthread_kill(self._main_id, signal.SIGALRM)
                 self._stop.wait(self.limit_s)   # one alarm per limit: the raise unwinds the hook
+                seen = None
 
-    def _on_alarm(self, _signum: int, _frame: Any) -> None:
-        call = self._overdue()
-        if call is None:
+    def _on_alarm(self, _signum: int, frame: FrameType | None) -> None:
+        overdue, self._overdue = self._overdue, None
+        while frame is not None and frame is not overdue:
+            frame = frame.f_back
+        if frame is None:
             return   # the hook returned in the meantime
-        who, method, args = call
-        self._call = None
-        raise HookTimeout(f"{who}: {hook_label(method, args)} did not return within "
-                          f"{self.limit_s:g} s (run.hook_timeout_s)")
+        raise HookTimeout(self._message)

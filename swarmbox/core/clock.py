@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from operator import attrgetter
 
 import numpy as np
 
@@ -78,13 +77,11 @@ class NodeClock:
 
 
 def readings(clocks: Sequence[NodeClock], true_t_s: float, out: np.ndarray | None = None) -> np.ndarray:
-    """Every clock's :meth:`NodeClock.now` at true time ``true_t_s``, in one numpy expression (the
-    same arithmetic, so the same values); written into ``out`` when given."""
-    n = len(clocks)
-    scale = np.fromiter(map(_SCALE, clocks), dtype=np.float64, count=n)
-    offset = np.fromiter(map(_OFFSET, clocks), dtype=np.float64, count=n)
-    np.multiply(scale, true_t_s, out=scale)
-    return np.add(scale, offset, out=out)
-
-
-_SCALE, _OFFSET = attrgetter("_scale"), attrgetter("_offset_s")
+    """Every clock's :meth:`NodeClock.now` at true time ``true_t_s`` (the same arithmetic, so the same
+    values); written into ``out`` when given. A list comprehension beats gathering the clocks' fields
+    into numpy at every fleet size up to a few hundred."""
+    values = [true_t_s * c._scale + c._offset_s for c in clocks]
+    if out is None:
+        return np.array(values, dtype=np.float64)
+    out[:] = values
+    return out

@@ -74,6 +74,7 @@ class CascadedController:
         self.integ_m_s2, self._prev_vel = z3(), z3()
         self.yaw_rad, self.yaw_tgt_rad = np.zeros(n), np.zeros(n)
         self._yaw_busy = False
+        self._yaw_err = np.zeros_like(self.yaw_rad)
         self.acc_ned_m_s2 = z3()
         self._att_acc = np.zeros((2, n))   # horizontal acceleration the attitude has reached so far
         self._att_alpha = 1.0
@@ -267,13 +268,25 @@ class CascadedController:
         np.copyto(acc_h, att)
 
     def _turn(self, dt_s: float) -> None:
-        err = self.yaw_tgt_rad - self.yaw_rad
-        err = (err + math.pi) % (2 * math.pi) - math.pi
+        """Every heading one yaw-rate step toward its target, wrapped to [-pi, pi) (in place: the same
+        arithmetic as ``clip`` and ``(x + pi) % 2pi - pi``, in fewer numpy calls)."""
+        yaw, err = self.yaw_rad, self._yaw_err
+        np.subtract(self.yaw_tgt_rad, yaw, out=err)
+        _wrap(err)
         step = math.radians(self.p.mpc_yawrauto_max_deg_s) * dt_s
-        np.clip(err, -step, step, out=err)
-        self.yaw_rad += err
-        self.yaw_rad[:] = (self.yaw_rad + math.pi) % (2 * math.pi) - math.pi
-        self._yaw_busy = bool(np.any(np.abs(err) >= step))
+        np.maximum(err, -step, out=err)
+        np.minimum(err, step, out=err)
+        yaw += err
+        _wrap(yaw)
+        np.abs(err, out=err)
+        self._yaw_busy = bool((err >= step).any())
+
+
+def _wrap(angle_rad: np.ndarray) -> None:
+    """Wrap angles to [-pi, pi), in place."""
+    angle_rad += math.pi
+    angle_rad %= 2 * math.pi
+    angle_rad -= math.pi
 
 
 def _saturate_h(x_n: np.ndarray, x_e: np.ndarray, vmax: np.ndarray, h: np.ndarray) -> None:

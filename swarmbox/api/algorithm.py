@@ -85,7 +85,8 @@ class DroneAlgorithm:
             self.prep_loop(ctx)
             return bool(self.prep_complete(ctx)), None
         if stage is Stage.EXECUTION:
-            sp = self.exec_loop(ctx) if ctx.state.armed else None
+            # ctx.state.armed, read from the telemetry: builds no DroneState the algorithm may never ask for
+            sp = self.exec_loop(ctx) if ctx._node.telemetry.armed else None
             return bool(self.exec_complete(ctx)), sp
         return True, None
 

@@ -96,6 +96,7 @@ class SimBackend:
         self._fix_lists: tuple[list, list, list] = ([], [], [])   # fix tuples, seq, ready: change
         #                                                           only with a fix, a crash, est_init_s
         self._supervised: set[int] = set()
+        self._supervise_order: list[int] | None = []   # sorted(self._supervised); None: to be sorted again
         self._closed = False
         self.vehicles = [SimVehicle(self, i, (h[0], h[1], h[2]), ctrl=self.ctrl, params=p, limits=limits)
                          for i, h in enumerate(homes.tolist())]
@@ -246,14 +247,21 @@ class SimBackend:
             self.emit(i, "estimator", "position_reset", {"count": count, "jump_m": jump_m})
 
     def _supervise(self) -> None:
-        for i in sorted(self._supervised):
-            if not self.vehicles[i].supervise(self.t_s):
+        order = self._supervise_order
+        if order is None:
+            order = self._supervise_order = sorted(self._supervised)
+        vehicles, t_s = self.vehicles, self.t_s
+        for i in order:
+            if not vehicles[i].supervise(t_s):
                 self._supervised.discard(i)
+                self._supervise_order = None
 
     # ---- services for SimVehicle (the SimFleet protocol) ------------------------------------------
     def supervise(self, i: int) -> None:
         """Have the supervisor watch vehicle ``i`` from the next step on."""
-        self._supervised.add(i)
+        if i not in self._supervised:
+            self._supervised.add(i)
+            self._supervise_order = None
 
     def emit(self, i: int, kind: str, name: str, data: dict[str, Any]) -> None:
         self._events.append(VehicleEvent(self._event_t_s, i, kind, name, data))

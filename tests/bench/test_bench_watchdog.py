@@ -2,7 +2,7 @@
 
 Run with ``python -m pytest tests/bench/test_bench_watchdog.py --benchmark-enable``; compare the two
 rows (``extra_info`` holds the tick-loop wall time). The interleaved ratio in docs/errors.md comes
-from ``python tests/bench/test_bench_watchdog.py`` (alternating runs, one process).
+from ``python -m tests.bench.test_bench_watchdog`` (alternating runs, one process).
 """
 
 from __future__ import annotations

@@ -135,8 +135,8 @@ class SimMedium:
             return
         t, tick = self._time.t_s, self._time.tick
         mtype, nbytes = MESSAGE_TYPES[type(msg)], msg.nbytes
-        sender.log((sender.clock.now(), tick, "send", msg.msg_id, mtype, src, BROADCAST, nbytes, msg.t_sent_s,
-                    text))
+        # a message is stamped with its sender's clock as it is sent: t_sent_s is that reading
+        sender.log((msg.t_sent_s, tick, "send", msg.msg_id, mtype, src, BROADCAST, nbytes, msg.t_sent_s, text))
         if reachable and self._plain():
             self._fifo.append((t + self._default.latency_s, tick, 0, dsts, msg, mtype, nbytes))
             return
@@ -162,7 +162,7 @@ class SimMedium:
             return
         t, tick = self._time.t_s, self._time.tick
         mtype, nbytes = MESSAGE_TYPES[type(msg)], msg.nbytes
-        sender.log((sender.clock.now(), tick, "send", msg.msg_id, mtype, src, dst, nbytes, msg.t_sent_s, ""))
+        sender.log((msg.t_sent_s, tick, "send", msg.msg_id, mtype, src, dst, nbytes, msg.t_sent_s, ""))
         if self._ideal and not self._links and not self.hooks:   # _plain(), inline: once per drone and tick
             receiver = self._nodes.get(dst)
             if receiver is not None and receiver.connected:   # ideal and reachable: no draw, FIFO

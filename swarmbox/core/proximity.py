@@ -167,6 +167,7 @@ class NeighbourList:
     def _rebuild(self, pts: np.ndarray, ids: tuple[int, ...], limit_m: float) -> None:
         self._ids, self._origin = ids, pts
         self._radius = limit_m + 2.0 * self.SKIN_M
+        # built for one query: an unbalanced, non-compact tree builds faster and finds the same pairs
         tree = kd_tree()(pts, balanced_tree=False, compact_nodes=False)
         found = tree.query_pairs(self._radius, output_type="ndarray")
         found = found[np.lexsort((found[:, 1], found[:, 0]))] if len(found) else found.reshape(0, 2)
@@ -174,12 +175,6 @@ class NeighbourList:
 
 
 def _pairs_within(view: tuple[DescendantState, ...], limit_m: float) -> list[tuple[int, int]]:
-    """Index pairs closer than ``limit_m`` (3-D): direct for small swarms, a k-d tree for large."""
-    if len(view) <= DIRECT_PAIRS_UP_TO:
-        return [(a, b) for a in range(len(view)) for b in range(a + 1, len(view))
-                if math.dist(view[a].pos_ned_m, view[b].pos_ned_m) < limit_m]
-    pts = np.fromiter(chain.from_iterable(d.pos_ned_m for d in view), float, 3 * len(view)).reshape(-1, 3)
-    # built for one query: an unbalanced, non-compact tree builds faster and finds the same pairs
-    tree = kd_tree()(pts, balanced_tree=False, compact_nodes=False)
-    pairs = tree.query_pairs(limit_m, output_type="ndarray")
-    return sorted(map(tuple, pairs.tolist()))
+    """Index pairs closer than ``limit_m`` (3-D), checking every pair (small swarms)."""
+    return [(a, b) for a in range(len(view)) for b in range(a + 1, len(view))
+            if math.dist(view[a].pos_ned_m, view[b].pos_ned_m) < limit_m]

@@ -119,9 +119,9 @@ def test_tracker_episodes_and_prediction():
 
 
 def test_the_kd_tree_path_finds_exactly_the_pairs_of_the_direct_check():
-    """Above ``DIRECT_PAIRS_UP_TO`` drones pairs come from a k-d tree: the same pairs, in the same order,
-    as checking every pair (clustered points, many at the limit's scale)."""
-    from swarmbox.core.proximity import DIRECT_PAIRS_UP_TO, _pairs_within
+    """Above ``DIRECT_PAIRS_UP_TO`` drones candidate pairs come from a k-d tree: the same pairs, in the
+    same order, as checking every pair (clustered points, many at the limit's scale)."""
+    from swarmbox.core.proximity import DIRECT_PAIRS_UP_TO, NeighbourList
 
     rng = np.random.default_rng(7)
     for n in (DIRECT_PAIRS_UP_TO + 1, 80, 300):
@@ -129,7 +129,9 @@ def test_the_kd_tree_path_finds_exactly_the_pairs_of_the_direct_check():
         view = tuple(DescendantState(i, 3, tuple(map(float, p))) for i, p in enumerate(pts))
         brute = [(a, b) for a, b in itertools.combinations(range(n), 2)
                  if math.dist(view[a].pos_ned_m, view[b].pos_ned_m) < 2.0]
-        assert _pairs_within(view, 2.0) == brute
+        found = NeighbourList().pairs(view, 2.0)
+        exact = [(a, b) for a, b in found if math.dist(view[a].pos_ned_m, view[b].pos_ned_m) < 2.0]
+        assert exact == brute   # candidates at exactly the limit are dropped by the caller's check
 
 
 def _brute(view, limit_m):

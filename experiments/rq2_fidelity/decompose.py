@@ -18,7 +18,8 @@ margins), the sim-vs-PX4 RMSE is split into:
   that reproduces PX4's own sensor-noise realisation.
 
 Also the correlation of the PX4 flights' residuals (flown path minus its own LTI fit) between runs
-and between drones: near 1 when the SIH instances draw the same noise sequence.
+(:func:`fidelity.noise_corr`, the largest over time shifts up to 10 s) and between drones: near 1
+when the SIH instances draw the same noise sequence.
 
     python experiments/rq2_fidelity/decompose.py RUN_DIR      # a sim run of the RQ2 formation
 """
@@ -50,7 +51,7 @@ def bounds(px4: dict[str, dict[int, pd.DataFrame]], drone: int) -> dict[str, flo
     lti = F.lti_fit(runs[0], mean, rel)
     pairs = [_rms(a - b) for k, a in enumerate(zp) for b in zp[k + 1:]]
     resid = [F.residual(r, rel) for r in runs]
-    corr = [_corr(a, b) for k, a in enumerate(resid) for b in resid[k + 1:]]
+    corr = [F.noise_corr(a, b) for k, a in enumerate(runs) for b in runs[k + 1:]]
     free = [p for p, c in zip(pairs, corr, strict=True) if c < F.SAME_NOISE]
     return {"lti_bound_m": float(np.mean([_rms(lti - z) for z in zp])),
             "px4_mean_m": float(np.mean([_rms(mean - z) for z in zp])),

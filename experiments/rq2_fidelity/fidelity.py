@@ -220,6 +220,23 @@ def noise_corr(a: pd.DataFrame, b: pd.DataFrame) -> float:
                for k in range(-k_max, k_max + 1))
 
 
+def leg_overshoots(f: pd.DataFrame, jump_m: float = 3.0) -> list[float]:
+    """How far (m) the estimated position passes each new position setpoint (a horizontal jump of more
+    than ``jump_m``), along the leg from the previous one, before the next setpoint or EXECUTION ends."""
+    f = f[f["stage"] == EXECUTION]
+    t = f["t_s"].to_numpy()
+    sp, pos = _h(f, "sp", t), _h(f, "pos", t)
+    step = np.hypot(*np.diff(sp, axis=1))
+    starts = np.flatnonzero(step > jump_m) + 1
+    out = []
+    for k, end in zip(starts, [*starts[1:], len(t)], strict=True):
+        leg = sp[:, k] - sp[:, k - 1]
+        unit = leg / np.linalg.norm(leg)
+        along = unit @ (pos[:, k:end] - sp[:, k - 1:k])
+        out.append(float(along.max() - np.linalg.norm(leg)))
+    return out
+
+
 def climb_s(f: pd.DataFrame, frac: float = 0.9) -> float:
     """Seconds from EXECUTION entry until the estimated altitude first covers ``frac`` of the climb
     from where it was at EXECUTION entry to the first altitude setpoint (estimates can be offset:

@@ -75,9 +75,11 @@ def run_one(run_dir: Path, overrides: list[str], boot_wait_s: float = 0.0) -> in
     launcher = None
     if boot_wait_s > 0:
         launcher = boot_px4(cfg, boot_wait_s)
+        connect = {"px4_build": None, "wait_ready": True, "connections": launcher.connections(),
+                   "system_ids": launcher.system_ids()}
         with open_dict(cfg):
-            cfg.backend.px4_build, cfg.backend.wait_ready = None, True
-        overrides = [*overrides, "backend.px4_build=null", "backend.wait_ready=true"]
+            cfg.backend.update(connect)
+        overrides = [*overrides, *(f"backend.{k}={json.dumps(v)}" for k, v in connect.items())]
     captured: dict[str, Any] = {}
     cpu0 = _cpu_s()
     try:

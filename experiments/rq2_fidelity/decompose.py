@@ -18,7 +18,8 @@ margins), the sim-vs-PX4 RMSE is split into:
   that reproduces PX4's own sensor-noise realisation.
 
 Also the correlation of the PX4 flights' residuals (flown path minus its own LTI fit) between runs
-and between drones: near 1 when the SIH instances draw the same noise sequence.
+(:func:`fidelity.noise_corr`, the largest over time shifts up to 10 s) and between drones: near 1
+when the SIH instances draw the same noise sequence.
 
     python experiments/rq2_fidelity/decompose.py RUN_DIR      # a sim run of the RQ2 formation
 """
@@ -37,51 +38,25 @@ import fidelity as F  # noqa: E402
 from flights import load_reference, run_flights  # noqa: E402
 
 REFERENCE = Path(__file__).resolve().parent / "data" / "px4_formation.parquet"
-FIR_S = 4.0
-
-
-def _z(f: pd.DataFrame, rel: np.ndarray, prefix: str = "pos", shift_s: float = 0.0) -> np.ndarray:
-    """Horizontal series as complex n + i·e on the clock ``rel`` from the flight's circle start."""
-    h = F._h(f, prefix, F.circle_window(f)[0] + rel - shift_s)
-    return h[0] + 1j * h[1]
-
-
-def _rms(d: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(np.abs(d) ** 2)))
-
-
-def _clock(flights: list[pd.DataFrame]) -> np.ndarray:
-    span = min(b - a for a, b in map(F.circle_window, flights))
-    return np.arange(-F.MARGIN_S, span + F.MARGIN_S, F.RESAMPLE_S)
-
-
-def lti_fit(sp_flight: pd.DataFrame, target: np.ndarray, rel: np.ndarray) -> np.ndarray:
-    """The best FIR (FIR_S long) + constant response to ``sp_flight``'s setpoint, fitted to ``target``."""
-    taps = round(FIR_S / F.RESAMPLE_S)
-    wide = _z(sp_flight, np.concatenate([rel[0] - F.RESAMPLE_S * np.arange(taps - 1, 0, -1), rel]), "sp")
-    x = np.array([wide[taps - 1 - k: taps - 1 - k + len(rel)] for k in range(taps)] + [np.ones(len(rel))]).T
-    # normal equations with a tiny ridge (einsum, and a 41x41 solve: multi-threaded BLAS lstsq on
-    # this small problem stalls for seconds on a loaded machine)
-    gram = np.einsum("ti,tj->ij", x.conj(), x)
-    gram += 1e-9 * np.trace(gram).real / len(gram) * np.eye(len(gram))
-    h = np.linalg.solve(gram, np.einsum("ti,t->i", x.conj(), target))
-    return np.einsum("ti,i->t", x, h)
+_z, _rms, _corr = F._z, F._rms, F._corr
 
 
 def bounds(px4: dict[str, dict[int, pd.DataFrame]], drone: int) -> dict[str, float]:
-    """PX4-only figures for one drone: the LTI bound, the PX4 mean, the floors."""
+    """PX4-only figures for one drone: the LTI bound, the PX4 mean, the floor (mean over the pairs
+    of independent noise, as fidelity.table) and the largest pair."""
     runs = [r[drone] for r in px4.values()]
-    rel = _clock(runs)
+    rel = F.clock(runs)
     zp = [_z(r, rel) for r in runs]
     mean = np.mean(zp, axis=0)
-    lti = lti_fit(runs[0], mean, rel)
+    lti = F.lti_fit(runs[0], mean, rel)
     pairs = [_rms(a - b) for k, a in enumerate(zp) for b in zp[k + 1:]]
-    resid = [z - lti_fit(r, z, rel) for r, z in zip(runs, zp)]
-    corr = [float(np.real(np.vdot(a, b)) / np.linalg.norm(a) / np.linalg.norm(b))
-            for k, a in enumerate(resid) for b in resid[k + 1:]]
+    resid = [F.residual(r, rel) for r in runs]
+    corr = [F.noise_corr(a, b) for k, a in enumerate(runs) for b in runs[k + 1:]]
+    free = [p for p, c in zip(pairs, corr, strict=True) if c < F.SAME_NOISE]
     return {"lti_bound_m": float(np.mean([_rms(lti - z) for z in zp])),
             "px4_mean_m": float(np.mean([_rms(mean - z) for z in zp])),
-            "floor_mean_pairs_m": float(np.mean(pairs)), "floor_max_pair_m": float(max(pairs)),
+            "floor_mean_pairs_m": float(np.mean(free)) if free else np.nan,
+            "floor_max_pair_m": float(max(pairs)),
             "px4_resid_m": float(np.mean([_rms(r) for r in resid])),
             "resid_corr_pairs": "/".join(f"{c:.2f}" for c in corr)}
 
@@ -89,14 +64,14 @@ def bounds(px4: dict[str, dict[int, pd.DataFrame]], drone: int) -> dict[str, flo
 def split(sim: pd.DataFrame, px4: dict[str, dict[int, pd.DataFrame]], drone: int) -> dict[str, float]:
     """The sim-vs-PX4 RMSE of one drone, split (mean over the PX4 flights)."""
     runs = [r[drone] for r in px4.values()]
-    rel = _clock([sim, *runs])
+    rel = F.clock([sim, *runs])
     zs, zp = _z(sim, rel), [_z(r, rel) for r in runs]
     score = lambda z: float(np.mean([_rms(z - p) for p in zp]))  # noqa: E731
     shifts = np.arange(-1.0, 1.0, 0.02)
     errs = [score(_z(sim, rel, shift_s=-s)) for s in shifts]
     end = rel[-1] - F.MARGIN_S
-    phase = {name: float(np.mean([_rms((zs - p)[m]) for p in zp]))
-             for name, m in (("hover_m", rel < 0), ("circle_m", (rel >= 0) & (rel <= end)), ("stop_m", rel > end))}
+    masks = (("hover_m", rel < 0), ("circle_m", (rel >= 0) & (rel <= end)), ("stop_m", rel > end))
+    phase = {name: float(np.mean([_rms((zs - p)[m]) for p in zp])) for name, m in masks}
     offset = np.mean([np.mean(zs - p) for p in zp])
     return {"sim_vs_px4_m": score(zs), "best_shift_s": float(shifts[int(np.argmin(errs))]),
             "shifted_m": float(min(errs)), "offset_n_m": float(offset.real), "offset_e_m": float(offset.imag),
@@ -106,10 +81,9 @@ def split(sim: pd.DataFrame, px4: dict[str, dict[int, pd.DataFrame]], drone: int
 def residual_corr_between_drones(px4: dict[str, dict[int, pd.DataFrame]], run: str) -> float:
     """Mean correlation of the residuals (path minus its LTI fit) of different drones in one run."""
     flights = px4[run]
-    rel = _clock(list(flights.values()))
-    res = [(_z(f, rel) - lti_fit(f, _z(f, rel), rel)) for f in flights.values()]
-    cs = [float(np.real(np.vdot(a, b)) / np.linalg.norm(a) / np.linalg.norm(b))
-          for k, a in enumerate(res) for b in res[k + 1:]]
+    rel = F.clock(list(flights.values()))
+    res = [F.residual(f, rel) for f in flights.values()]
+    cs = [_corr(a, b) for k, a in enumerate(res) for b in res[k + 1:]]
     return float(np.mean(cs))
 
 

@@ -7,8 +7,13 @@ with ``--px4-build``, else the committed reference ``data/px4_formation.parquet`
     python experiments/rq2_fidelity/run.py                   # full mission (about 2 minutes)
     python experiments/rq2_fidelity/run.py --ci              # shortened mission (about 40 s)
     python experiments/rq2_fidelity/run.py --px4-build ~/PX4-Autopilot   # also PX4 SITL (SIH)
-    python experiments/rq2_fidelity/run.py --px4-only --px4-build ../shared/px4-sitl --px4-runs 2 \
+    python experiments/rq2_fidelity/run.py --px4-only --px4-build ../shared/px4-sitl --px4-runs 4 \
+        --px4-boot-wait 10 45 80 115 \
         --save-reference experiments/rq2_fidelity/data/px4_formation.parquet   # re-record PX4 at 1x
+
+PX4 SIH draws the same sensor-noise sequence from every boot, so two PX4 runs with the same timing
+fly the same noise; ``--px4-boot-wait`` boots each run's instances that many wall seconds before
+its mission starts (one value per run), which makes the runs' noise independent.
 
 Each run is a separate process (``--one``), so the runner's memory is measured without this
 script's pandas and matplotlib.
@@ -50,8 +55,9 @@ def backends(speed: float, px4_build: str | None, px4_runs: int = 1, px4_speed: 
 
 
 # ---- one run, in its own process (no pandas here) ---------------------------------------------------
-def run_one(run_dir: Path, overrides: list[str]) -> int:
-    """Execute one run into ``run_dir`` and leave ``overhead.json`` beside its logs."""
+def run_one(run_dir: Path, overrides: list[str], boot_wait_s: float = 0.0) -> int:
+    """Execute one run into ``run_dir`` and leave ``overhead.json`` beside its logs; a PX4 run with
+    ``boot_wait_s`` > 0 flies on instances booted that many wall seconds earlier."""
     sys.path.insert(0, str(ROOT))
     from hydra import compose, initialize_config_dir
     from omegaconf import open_dict
@@ -66,9 +72,22 @@ def run_one(run_dir: Path, overrides: list[str]) -> int:
     choices = {g: str(cfg.hydra.runtime.choices.get(g)) for g in GROUPS}
     with open_dict(cfg):
         del cfg["hydra"]
+    launcher = None
+    if boot_wait_s > 0:
+        launcher = boot_px4(cfg, boot_wait_s)
+        connect = {"px4_build": None, "wait_ready": True, "connections": launcher.connections(),
+                   "system_ids": launcher.system_ids()}
+        with open_dict(cfg):
+            cfg.backend.update(connect)
+        overrides = [*overrides, *(f"backend.{k}={json.dumps(v)}" for k, v in connect.items())]
     captured: dict[str, Any] = {}
     cpu0 = _cpu_s()
-    manifest = execute(cfg, run_dir, choices, overrides, lambda swarm: captured.update(backend=swarm.backend))
+    try:
+        manifest = execute(cfg, run_dir, choices, overrides,
+                           lambda swarm: captured.update(backend=swarm.backend))
+    finally:
+        if launcher is not None:
+            launcher.stop()
     backend = captured.get("backend")
     overhead = {
         "status": manifest["status"], "sim_time_s": manifest["sim_time_s"],
@@ -80,6 +99,28 @@ def run_one(run_dir: Path, overrides: list[str]) -> int:
     }
     (run_dir / "overhead.json").write_text(json.dumps(overhead, indent=2))
     return 0 if manifest["status"] == "ok" else 1
+
+
+def boot_px4(cfg: Any, wait_s: float) -> Any:
+    """Start the PX4 instances of a ``backend=px4`` config and return their launcher ``wait_s`` wall
+    seconds later (the run then connects to them)."""
+    from omegaconf import OmegaConf
+
+    from swarmbox.hal.mavlink.frames import GeoFrame
+    from swarmbox.hal.px4.params import Px4Params
+    from swarmbox.hal.px4.sitl import SitlLauncher
+    from swarmbox.run.mission import load
+
+    params = OmegaConf.to_container(cfg.backend, resolve=True)
+    for key in ("_target_", "name"):
+        params.pop(key, None)
+    p = Px4Params.from_kwargs({**params, "run_dir": None})
+    mission = load(cfg)
+    homes = [mission.initial_positions[i] for i in mission.drone_ids]
+    launcher = SitlLauncher(p, homes, GeoFrame(p.origin_lat_deg, p.origin_lon_deg, p.origin_alt_m), None)
+    launcher.start([])
+    time.sleep(wait_s)
+    return launcher
 
 
 def _cpu_s() -> float:
@@ -128,6 +169,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--px4-build", default=os.environ.get("SWARMBOX_PX4_BUILD"))
     ap.add_argument("--px4-runs", type=int, default=1, help="PX4 repetitions (>= 2 gives the noise floor)")
     ap.add_argument("--px4-speed", type=float, default=1.0, help="PX4_SIM_SPEED_FACTOR of the PX4 runs")
+    ap.add_argument("--px4-boot-wait", type=float, nargs="+", metavar="S",
+                    help="wall s from booting PX4 to the mission, one per PX4 run (independent SIH noise)")
     ap.add_argument("--px4-only", action="store_true", help="no mavsim run (sim and PX4 only)")
     ap.add_argument("--reference", type=Path, default=REFERENCE,
                     help="recorded PX4 flights compared with the sim when no PX4 run is made")
@@ -136,15 +179,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--one", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.one:
-        return run_one(Path(args.one[0]), args.one[1:])
+        return run_one(Path(args.one[0]), args.one[2:], float(args.one[1]))
     out = args.out / time.strftime("%Y-%m-%d_%H-%M-%S")
     common = [*MISSION, *(CI_MISSION if args.ci else []), f"seed={args.seed}"]
     runs: dict[str, Path] = {}
     plan = backends(args.speed, args.px4_build, args.px4_runs, args.px4_speed, not args.px4_only)
+    px4_labels = [label for label in plan if label.startswith("px4")]
+    if args.px4_boot_wait and len(px4_labels) != len(args.px4_boot_wait):
+        ap.error("--px4-boot-wait needs one value per PX4 run")
+    waits = dict(zip(px4_labels, args.px4_boot_wait or [0.0] * len(px4_labels), strict=True))
     for label, extra in plan.items():
         run_dir = out / label
         print(f"[rq2] {label}: {' '.join(extra)}", flush=True)
-        code = subprocess.call([sys.executable, __file__, "--one", str(run_dir), *common, *extra], cwd=ROOT)
+        code = subprocess.call([sys.executable, __file__, "--one", str(run_dir), str(waits.get(label, 0.0)),
+                                *common, *extra], cwd=ROOT)
         if code != 0:
             print(f"[rq2] {label} run failed (see {run_dir}/run.json)", file=sys.stderr)
             return 1
@@ -193,8 +241,13 @@ def fidelity_report(runs: dict[str, Path], out: Path, args: argparse.Namespace) 
         px4 = {label: run_flights(d) for label, d in px4_dirs.items()}
         source = "this run"
         if args.save_reference:
-            note = {"note": f"RQ2 formation on PX4 SITL at speed {args.px4_speed:g}; load before: "
-                            f"{os.getloadavg()}", "sample_s": 0.05, "runs": {}}
+            waits = dict(zip(px4_dirs, args.px4_boot_wait or [0.0] * len(px4_dirs), strict=True))
+            note = {"note": f"RQ2 formation on PX4 SITL at speed {args.px4_speed:g}; load after: "
+                            f"{os.getloadavg()}", "sample_s": 0.05,
+                    "runs": {label: {**{k: v for k, v in json.loads((d / "run.json").read_text()).items()
+                                        if k in ("status", "sim_time_s", "wall_time_s", "overrides")},
+                                     "boot_wait_s": waits.get(label, 0.0)}
+                             for label, d in px4_dirs.items()}}
             save_reference(px4_dirs, args.save_reference, note)
     elif args.ci:
         print("[rq2] --ci flies a shorter mission than the recorded PX4 flights: no sim-vs-PX4 table")

@@ -67,7 +67,8 @@ class CascadedController:
         self.vmax_h_m_s = np.full(n, p.mpc_xy_vel_max_m_s)
         self.vmin_d_m_s = np.full(n, -p.mpc_z_vel_max_up_m_s)   # most negative vertical velocity (up)
         self.vmax_d_m_s = np.full(n, p.mpc_z_vel_max_dn_m_s)
-        self.tko_up_m_s = np.full(n, np.inf)   # takeoff ramp: climb-rate limit on top of vmin_d (inf: none)
+        self.tko_up_m_s = np.full(n, np.inf)   # takeoff ramp: climb-rate limit on top of vmin_d (inf: none;
+                                                # negative: a descent rate is forced, zero thrust on the ground)
         self.ramping = False                    # any column with a finite takeoff-ramp limit
         self._ramp_ids: set[int] = set()        # ... which ones (set per drone and tick: no array scan)
         self.amax_d_m_s2 = np.full(n, p.mpc_acc_down_max_m_s2)  # gravity for thrust-off columns
@@ -204,9 +205,9 @@ class CascadedController:
         vsp += self.vel_ff_ned_m_s
         _saturate_h(vn, ve, self.vmax_h_m_s, self._h)
         np.maximum(vd, self.vmin_d_m_s, out=vd)
-        if self.ramping:
-            np.maximum(vd, -self.tko_up_m_s, out=vd)
         np.minimum(vd, self.vmax_d_m_s, out=vd)
+        if self.ramping:   # last, as PX4's constrain(vz, -up, down): a negative ramp limit forces descent
+            np.maximum(vd, -self.tko_up_m_s, out=vd)
 
     def _delayed_target(self) -> np.ndarray:
         """Position targets with the offboard columns as they were offboard_delay_s ago (a ring of
@@ -248,7 +249,7 @@ class CascadedController:
         _saturate_h(an, ae, self._lim_h, h)
         np.multiply(accel_scale, self._neg_up_max, out=self._lim_up)
         np.maximum(ad, self._lim_up, out=ad)
-        np.minimum(ad, self.amax_d_m_s2, out=ad)
+        np.minimum(ad, self._ramp_down_limit() if self.ramping else self.amax_d_m_s2, out=ad)
         np.equal(tmp[2], ad, out=h)
         tmp -= acc
         tmp *= self._arw_gain
@@ -256,6 +257,12 @@ class CascadedController:
         np.multiply(self._vsp_rows[2], h, out=self._vsp_rows[2])
         vsp *= self._ki_dt_v
         self.integ_m_s2 += vsp
+
+    def _ramp_down_limit(self) -> np.ndarray:
+        """Downward acceleration limits with the ramping columns at g: PX4 bounds the thrust, not the
+        acceleration, and from zero until the vehicle flies, so its takeoff ramp starts at zero thrust
+        and the vertical integrator winds down while the vehicle still sits on the ground."""
+        return np.where(np.isfinite(self.tko_up_m_s), GRAVITY_M_S2, self.amax_d_m_s2)
 
     def _attitude_lag(self) -> None:
         """The horizontal rows of acc become the first-order lagged tilt (controller state is untouched)."""

@@ -229,9 +229,9 @@ class SimVehicle:
         return self.armed and (self.mode in _AUTO or self._braking or not self._been_airborne or ramping)
 
     def _ramp_takeoff(self, t_s: float) -> bool:
-        """PX4's smooth takeoff: no lift for COM_SPOOLUP_TIME after arming, then the climb-rate
-        limit ramps linearly over MPC_TKO_RAMP_T from -g/MPC_Z_VEL_P_ACC (the value that commands
-        zero thrust) to MPC_Z_VEL_MAX_UP. Returns whether the ramp is still running."""
+        """PX4's smooth takeoff: the climb-rate limit stays at -g/MPC_Z_VEL_P_ACC (a descent rate that
+        commands zero thrust) for COM_SPOOLUP_TIME after arming, then ramps linearly over
+        MPC_TKO_RAMP_T to MPC_Z_VEL_MAX_UP (Takeoff.cpp). Returns whether the ramp is still running."""
         p, i = self._p, self.drone_id
         since = t_s - self._arm_t_s - p.com_spoolup_time_s
         if not self.armed or p.mpc_tko_ramp_t_s <= 0 or since >= p.mpc_tko_ramp_t_s:
@@ -239,7 +239,7 @@ class SimVehicle:
             return False
         start = -GRAVITY_M_S2 / max(p.mpc_z_vel_p_acc, 1e-6)
         frac = min(max(since / p.mpc_tko_ramp_t_s, 0.0), 1.0)
-        self._ctrl.set_takeoff_ramp(i, max(start + frac * (p.mpc_z_vel_max_up_m_s - start), 0.0))
+        self._ctrl.set_takeoff_ramp(i, start + frac * (p.mpc_z_vel_max_up_m_s - start))
         return True
 
     def _rtl_step(self) -> None:

@@ -59,7 +59,8 @@ class Setpoint(NamedTuple):
     @classmethod
     def velocity(cls, n_m_s: float, e_m_s: float, d_m_s: float,
                  yaw_rad: float | None = None) -> Setpoint:
-        return tuple.__new__(cls, (SetpointKind.VELOCITY, (float(n_m_s), float(e_m_s), float(d_m_s)), yaw_rad))
+        return tuple.__new__(cls, (SetpointKind.VELOCITY, (float(n_m_s), float(e_m_s), float(d_m_s)),
+                                   yaw_rad))
 
     @classmethod
     def acceleration(cls, n_m_s2: float, e_m_s2: float, d_m_s2: float,

@@ -136,7 +136,8 @@ class SimMedium:
         t, tick = self._time.t_s, self._time.tick
         mtype, nbytes = MESSAGE_TYPES[type(msg)], msg.nbytes
         # a message is stamped with its sender's clock as it is sent: t_sent_s is that reading
-        sender.log((msg.t_sent_s, tick, "send", msg.msg_id, mtype, src, BROADCAST, nbytes, msg.t_sent_s, text))
+        sent = msg.t_sent_s
+        sender.log((sent, tick, "send", msg.msg_id, mtype, src, BROADCAST, nbytes, sent, text))
         if reachable and self._plain():
             self._fifo.append((t + self._default.latency_s, tick, 0, dsts, msg, mtype, nbytes))
             return
@@ -162,7 +163,8 @@ class SimMedium:
             return
         t, tick = self._time.t_s, self._time.tick
         mtype, nbytes = MESSAGE_TYPES[type(msg)], msg.nbytes
-        sender.log((msg.t_sent_s, tick, "send", msg.msg_id, mtype, src, dst, nbytes, msg.t_sent_s, ""))
+        sent = msg.t_sent_s
+        sender.log((sent, tick, "send", msg.msg_id, mtype, src, dst, nbytes, sent, ""))
         if self._ideal and not self._links and not self.hooks:   # _plain(), inline: once per drone and tick
             receiver = self._nodes.get(dst)
             if receiver is not None and receiver.connected:   # ideal and reachable: no draw, FIFO
@@ -212,16 +214,15 @@ class SimMedium:
     def _hand_over(self, item: tuple, tick: int) -> None:
         arrival, _, _, dst, msg, mtype, nbytes = item
         if type(dst) is tuple:   # one Heartbeat for all its subscribers (ideal network)
-            nodes = self._nodes
+            nodes, msg_id, src, t_sent_s = self._nodes, msg.msg_id, msg.src, msg.t_sent_s
             for d in dst:
                 ep = nodes[d]
                 if ep.connected:
-                    ep.log((ep.clock.at(arrival), tick, "recv", msg.msg_id, mtype, msg.src, d, nbytes,
-                            msg.t_sent_s, ""))
+                    ep.log((ep.clock.at(arrival), tick, "recv", msg_id, mtype, src, d, nbytes, t_sent_s, ""))
                     ep.inbox.append(msg)
                 else:
-                    self._drop_log((arrival, tick, "drop", msg.msg_id, mtype, msg.src, d, nbytes,
-                                    msg.t_sent_s, "unreachable"))
+                    self._drop_log((arrival, tick, "drop", msg_id, mtype, src, d, nbytes, t_sent_s,
+                                    "unreachable"))
             return
         ep = self._nodes[dst]
         if not ep.connected:

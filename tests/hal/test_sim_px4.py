@@ -128,7 +128,7 @@ def test_land_aims_at_the_stop_point_px4_projects_from_the_velocity():
         b = make(**(PX4 | {"land_at_stop_point": stop_point}))
         f, v = Flight(b), b.vehicles[0]
         f.airborne(0, 5.0)
-        f.run_for(6.0, lambda: v.setpoint(Setpoint.velocity(1.5, 0.0, 0.0)))
+        f.run_for(6.0, lambda v=v: v.setpoint(Setpoint.velocity(1.5, 0.0, 0.0)))
         est, vel = b.est_pos_ned_m[0].copy(), f.tel().vel_ned_m_s
         v.land()
         speed = math.hypot(vel[0], vel[1])

@@ -67,8 +67,9 @@ class CascadedController:
         self.vmax_h_m_s = np.full(n, p.mpc_xy_vel_max_m_s)
         self.vmin_d_m_s = np.full(n, -p.mpc_z_vel_max_up_m_s)   # most negative vertical velocity (up)
         self.vmax_d_m_s = np.full(n, p.mpc_z_vel_max_dn_m_s)
-        self.tko_up_m_s = np.full(n, np.inf)   # takeoff ramp: climb-rate limit on top of vmin_d (inf: none;
-                                                # negative: a descent rate is forced, zero thrust on the ground)
+        # takeoff ramp: climb-rate limit on top of vmin_d (inf: none; negative: a descent rate is forced,
+        # zero thrust on the ground)
+        self.tko_up_m_s = np.full(n, np.inf)
         self.ramping = False                    # any column with a finite takeoff-ramp limit
         self._ramp_ids: set[int] = set()        # ... which ones (set per drone and tick: no array scan)
         self.amax_d_m_s2 = np.full(n, p.mpc_acc_down_max_m_s2)  # gravity for thrust-off columns

@@ -50,9 +50,9 @@ class SimParams:
     mc_roll_p: float = 0.0                # 1/s, MC_ROLL_P (PX4: 4): tilt time constant 1/P; 0: instant tilt
     vel_drag_ff: float = 1.0              # fraction of the drag fed forward at the velocity setpoint (PX4: 0)
     acc_hor_max_offboard: bool = True     # MPC_ACC_HOR_MAX limits offboard setpoints too (PX4: tilt only)
-    land_at_stop_point: bool = False      # LAND aims at PX4's projected stop point (PX4: true), else where it began
+    land_at_stop_point: bool = False      # LAND at PX4's projected stop point (PX4: true), else in place
     mpc_acc_hor_m_s2: float = 3.0         # MPC_ACC_HOR: the braking acceleration of that projection
-    offboard_delay_s: float = 0.0         # offboard position setpoints act this late (link to PX4); 0: at once
+    offboard_delay_s: float = 0.0         # offboard position setpoints act this late (link to PX4); 0: now
     # automatic modes
     takeoff_acceptance_m: float = 0.3     # TAKEOFF switches to HOLD within this of the target altitude
     hold_brake_speed_m_s: float = 0.2     # HOLD brakes (velocity 0) until this slow, then holds position

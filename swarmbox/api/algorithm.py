@@ -8,6 +8,10 @@ from typing import ClassVar, final
 from swarmbox.api.context import DroneContext, GroundContext
 from swarmbox.api.types import DescendantState, InferiorReport, Setpoint, Stage, Task
 
+# Enum members as module globals: ``Stage.EXECUTION`` is a class-attribute lookup that costs several
+# times a global's, and the drivers below run once per node and tick.
+_PREPARATION, _EXECUTION = Stage.PREPARATION, Stage.EXECUTION
+
 
 class DroneAlgorithm:
     """Base class of a drone's algorithm (one instance per drone).
@@ -81,10 +85,10 @@ class DroneAlgorithm:
     @final
     def run_stage(self, stage: Stage, ctx: DroneContext) -> tuple[bool, Setpoint | None]:
         """Framework driver: one tick of ``stage``; returns (complete, setpoint)."""
-        if stage is Stage.PREPARATION:
+        if stage is _PREPARATION:
             self.prep_loop(ctx)
             return bool(self.prep_complete(ctx)), None
-        if stage is Stage.EXECUTION:
+        if stage is _EXECUTION:
             # ctx.state.armed, read from the telemetry: builds no DroneState the algorithm may never ask for
             sp = self.exec_loop(ctx) if ctx._node.telemetry.armed else None
             return bool(self.exec_complete(ctx)), sp
@@ -138,10 +142,10 @@ class GroundAlgorithm:
     @final
     def run_stage(self, stage: Stage, ctx: GroundContext) -> bool:
         """Framework driver: one tick of ``stage``; returns whether the ground is satisfied."""
-        if stage is Stage.PREPARATION:
+        if stage is _PREPARATION:
             self.prep_loop(ctx)
             return bool(self.prep_complete(ctx))
-        if stage is Stage.EXECUTION:
+        if stage is _EXECUTION:
             self.exec_loop(ctx)
             return bool(self.exec_complete(ctx))
         return True

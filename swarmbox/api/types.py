@@ -40,6 +40,9 @@ class SetpointKind(IntEnum):
     ACCELERATION = 2
 
 
+_POSITION, _VELOCITY, _ACCELERATION = SetpointKind.POSITION, SetpointKind.VELOCITY, SetpointKind.ACCELERATION
+
+
 class Setpoint(NamedTuple):
     """A target for the vehicle's controller, in the mission's NED frame.
 
@@ -54,18 +57,18 @@ class Setpoint(NamedTuple):
     @classmethod
     def position(cls, n_m: float, e_m: float, d_m: float, yaw_rad: float | None = None) -> Setpoint:
         # tuple.__new__: the NamedTuple's own constructor is one more Python call per drone and tick
-        return tuple.__new__(cls, (SetpointKind.POSITION, (float(n_m), float(e_m), float(d_m)), yaw_rad))
+        return tuple.__new__(cls, (_POSITION, (float(n_m), float(e_m), float(d_m)), yaw_rad))
 
     @classmethod
     def velocity(cls, n_m_s: float, e_m_s: float, d_m_s: float,
                  yaw_rad: float | None = None) -> Setpoint:
-        return tuple.__new__(cls, (SetpointKind.VELOCITY, (float(n_m_s), float(e_m_s), float(d_m_s)),
+        return tuple.__new__(cls, (_VELOCITY, (float(n_m_s), float(e_m_s), float(d_m_s)),
                                    yaw_rad))
 
     @classmethod
     def acceleration(cls, n_m_s2: float, e_m_s2: float, d_m_s2: float,
                      yaw_rad: float | None = None) -> Setpoint:
-        return tuple.__new__(cls, (SetpointKind.ACCELERATION, (float(n_m_s2), float(e_m_s2), float(d_m_s2)),
+        return tuple.__new__(cls, (_ACCELERATION, (float(n_m_s2), float(e_m_s2), float(d_m_s2)),
                                    yaw_rad))
 
 

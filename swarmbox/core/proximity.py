@@ -17,6 +17,7 @@ import functools
 import math
 from dataclasses import dataclass
 from itertools import chain
+from operator import itemgetter
 
 import numpy as np
 
@@ -24,6 +25,7 @@ from swarmbox.core.messages import DescendantState
 
 Pair = tuple[int, int]   # (lower id, higher id)
 DIRECT_PAIRS_UP_TO = 24         # up to this many drones, check every pair directly
+_ID, _POS = itemgetter(0), itemgetter(2)   # DescendantState's drone_id and pos_ned_m, read in C
 
 
 @dataclass(slots=True)
@@ -148,8 +150,8 @@ class NeighbourList:
         n = len(view)
         if n <= DIRECT_PAIRS_UP_TO:
             return _pairs_within(view, limit_m)
-        pts = np.fromiter(chain.from_iterable(d.pos_ned_m for d in view), float, 3 * n).reshape(-1, 3)
-        ids = tuple(d.drone_id for d in view)
+        pts = np.fromiter(chain.from_iterable(map(_POS, view)), float, 3 * n).reshape(-1, 3)
+        ids = tuple(map(_ID, view))
         if ids != self._ids or not self._valid(pts, limit_m):
             self._rebuild(pts, ids, limit_m)
         a, b = self._cand

@@ -48,6 +48,8 @@ def column(values: Sequence, typ: pa.DataType) -> pa.Array:
 
 def _strings(values: Sequence[str]) -> pa.Array:
     n = len(values)
+    if type(values) is list and n and values.count(values[0]) == n and n * len(values[0].encode()) < 2**31:
+        return _repeated(values[0], n)   # one value throughout (a setpoint's kind, "ok", ""): no scan
     joined = "".join(values)
     data = joined.encode()
     offsets = np.zeros(n + 1, dtype=np.int64)
@@ -60,6 +62,13 @@ def _strings(values: Sequence[str]) -> pa.Array:
                                                       pa.py_buffer(data)])
     big = pa.Array.from_buffers(pa.large_string(), n, [None, pa.py_buffer(offsets), pa.py_buffer(data)])
     return big.cast(pa.string())
+
+
+def _repeated(value: str, n: int) -> pa.Array:
+    """``n`` copies of ``value`` as a string column (int32 offsets: fewer than 2**31 bytes in all)."""
+    data = value.encode()
+    offsets = np.arange(n + 1, dtype=np.int32) * np.int32(len(data))
+    return pa.Array.from_buffers(pa.string(), n, [None, pa.py_buffer(offsets), pa.py_buffer(data * n)])
 
 
 def _field(rows: Sequence[tuple], index: int, typ: pa.DataType) -> pa.Array:

@@ -196,14 +196,17 @@ def summarize(runs: pd.DataFrame, metrics: list[str], opts: SweepOptions,
     return pd.DataFrame(rows)
 
 
-def _pairs_frame(runs: pd.DataFrame, opts: SweepOptions, choice_columns: list[str], a: str, b: str,
-                 metric: str) -> pd.DataFrame:
-    label = runs[list(opts.group_by)].astype("str").agg("/".join, axis=1)
-    keys = ["seed"] + [c for c in choice_columns if c not in opts.group_by]
-    left = runs[label == a][keys + [metric]].rename(columns={metric: "a"})
-    right = runs[label == b][keys + [metric]].rename(columns={metric: "b"})
-    both = left.merge(right, on=keys, how="inner").dropna(subset=["a", "b"])
-    return both[np.isfinite(both["a"]) & np.isfinite(both["b"])]
+def _labels(runs: pd.DataFrame, group_by: tuple[str, ...]) -> pd.Series:
+    """Each run's group label ("a/b" for several group-by columns)."""
+    return runs[list(group_by)].astype("str").agg("/".join, axis=1)
+
+
+def _pairs_frame(runs: pd.DataFrame, labels: pd.Series, keys: list[str], metrics: list[str], a: str,
+                 b: str) -> pd.DataFrame:
+    """Runs of ``a`` and ``b`` paired on ``keys``: a row per pair, columns ``<metric>_a``, ``<metric>_b``."""
+    left = runs[labels == a][keys + metrics]
+    right = runs[labels == b][keys + metrics]
+    return left.merge(right, on=keys, how="inner", suffixes=("_a", "_b"))
 
 
 def _wilcoxon(diff: np.ndarray) -> float:
@@ -226,21 +229,26 @@ def paired(runs: pd.DataFrame, metrics: list[str], opts: SweepOptions, choice_co
     chosen = runs[runs["status"].isin(opts.statuses)] if len(runs) else runs
     if chosen.empty:
         return pd.DataFrame(columns=PAIRED_COLUMNS)
-    labels = sorted(chosen[list(opts.group_by)].astype("str").agg("/".join, axis=1).unique())
-    pairs = opts.pairs if opts.pairs is not None else tuple(itertools.combinations(labels, 2))
+    labels = _labels(chosen, opts.group_by)
+    groups = sorted(labels.unique())
+    pairs = opts.pairs if opts.pairs is not None else tuple(itertools.combinations(groups, 2))
+    keys = ["seed"] + [c for c in choice_columns if c not in opts.group_by]
+    compared = [m for m in metrics if m not in MACHINE_METRICS]
     rows = []
     for a, b in pairs:
-        for metric in (m for m in metrics if m not in MACHINE_METRICS):
-            both = _pairs_frame(chosen, opts, choice_columns, a, b, metric)
-            if both.empty:
+        joined = _pairs_frame(chosen, labels, keys, compared, a, b)
+        for metric in compared:
+            va, vb = (joined[f"{metric}_{side}"].to_numpy(dtype="float64") for side in ("a", "b"))
+            both = np.isfinite(va) & np.isfinite(vb)
+            if not both.any():
                 continue    # no run of a shares its seed (and other choices) with a run of b
-            diff = (both["b"] - both["a"]).to_numpy(dtype="float64")
+            va, vb = va[both], vb[both]
+            diff = vb - va
             lo, hi = bootstrap_ci(diff, _rng(opts.seed, a, b, metric), opts.n_boot, opts.ci)
             direction = direction_of(metric, directions)
             rows.append({"a": a, "b": b, "metric": metric, "n_pairs": int(diff.size),
-                         "mean_a": float(both["a"].mean()) if diff.size else np.nan,
-                         "mean_b": float(both["b"].mean()) if diff.size else np.nan,
-                         "diff_mean": float(diff.mean()) if diff.size else np.nan,
+                         "mean_a": float(va.mean()), "mean_b": float(vb.mean()),
+                         "diff_mean": float(diff.mean()),
                          "ci_low": lo, "ci_high": hi,
                          "p_wilcoxon": _wilcoxon(diff) if diff.size >= MIN_N_CI else np.nan,
                          "note": ci_note(diff.size).replace("n=", "pairs=").replace("CI", "CI, no test"),

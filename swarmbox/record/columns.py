@@ -8,6 +8,7 @@ nodes' rows (not once per node), so its fixed costs do not grow with the swarm.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import cache
 from operator import itemgetter
 
 import numpy as np
@@ -33,6 +34,13 @@ def arrow_schema(table: str) -> pa.Schema:
 def spill_schema(table: str) -> pa.Schema:
     """A table's schema plus the writing node, for the run-wide spill file."""
     return arrow_schema(table).append(NODE)
+
+
+@cache
+def text_columns(table: str) -> list[str]:
+    """The table's text columns: the only ones worth dictionary-encoding in Parquet. Numbers rarely
+    repeat (times, positions), and trying a dictionary on them first doubles the cost of a write."""
+    return [c.name for c in TABLES[table] if c.dtype == "string"]
 
 
 def column(values: Sequence, typ: pa.DataType) -> pa.Array:

@@ -29,7 +29,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from swarmbox.record.blocks import StateBlocks
-from swarmbox.record.columns import NODE, arrow_schema, batch, numbers, spill_schema
+from swarmbox.record.columns import NODE, arrow_schema, batch, numbers, spill_schema, text_columns
 from swarmbox.record.schema import node_name
 
 GROUND_TABLES = ("messages", "stages", "events")
@@ -105,7 +105,7 @@ class _SpillWriter(threading.Thread):
         if writer is None:
             self.root.mkdir(parents=True, exist_ok=True)
             writer = pq.ParquetWriter(self.root / f"{chunk.table}.parquet", spill_schema(chunk.table),
-                                      compression="lz4")
+                                      compression="lz4", use_dictionary=text_columns(chunk.table))
             self.writers[chunk.table] = writer
         writer.write_batch(data, row_group_size=len(chunk))
         offsets = np.concatenate([[0], np.cumsum(chunk.counts)[:-1]]).tolist()
@@ -248,5 +248,5 @@ def _write_node_file(path: Path, table: str, pieces: list[pa.Table]) -> None:
     data = data.cast(schema)
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_name(path.name + ".partial")
-    pq.write_table(data, partial, compression="zstd")
+    pq.write_table(data, partial, compression="zstd", use_dictionary=text_columns(table))
     os.replace(partial, path)

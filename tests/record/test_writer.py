@@ -60,3 +60,22 @@ def test_a_bad_row_fails_the_close_with_a_named_error_and_keeps_other_tables(tmp
         rec.close()
     assert pq.read_table(tmp_path / "logs" / "drone_0" / "stages.parquet").num_rows == 1
     assert pq.read_table(tmp_path / "logs" / "drone_0" / "events.parquet").num_rows == 0
+
+
+def test_only_text_columns_are_dictionary_encoded(tmp_path):
+    """Numbers (times, positions) rarely repeat: a dictionary tried on them first doubles a write's
+    cost and bloats the file; text columns (kind, type, mode) compress far better with one."""
+    rec = Recorder(tmp_path, flush_rows=50)   # rows through the spill file and straight from memory
+    append = rec.node(0).appender("messages")
+    for tick in range(400):
+        append((tick * 0.025, tick, "send" if tick % 2 else "recv", tick, "report", 0, -1, 120,
+                tick * 0.025 - 0.01, ""))
+        if tick == 200:
+            rec.flush()
+    rec.close()
+    meta = pq.ParquetFile(tmp_path / "logs" / "drone_0" / "messages.parquet").metadata
+    for group in range(meta.num_row_groups):
+        for i in range(meta.num_columns):
+            chunk = meta.row_group(group).column(i)
+            dictionary = any("DICTIONARY" in e for e in chunk.encodings)
+            assert dictionary == (chunk.path_in_schema in ("kind", "type", "reason")), chunk.path_in_schema

@@ -69,7 +69,8 @@ def _positive(key: str, value: Any, *, allow_zero: bool = False) -> None:
 def _run(r: DictConfig) -> None:
     _positive("run.tick_hz", r.tick_hz)
     _positive("run.speed", r.speed)
-    for key, allowed in (("runtime", ("single", "processes")), ("monitor", ("auto", "on", "off"))):
+    for key, allowed in (("runtime", ("single", "processes")), ("monitor", ("auto", "on", "off")),
+                         ("log_writer", ("auto", "thread", "process"))):
         if r[key] not in allowed:
             raise ConfigError(f"run.{key} must be one of {', '.join(allowed)}, got '{r[key]}'")
     if r.hook_timeout_s is not None:

@@ -148,7 +148,9 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         "versions": _versions(), "git_sha": _git_sha(),
         "started_at": datetime.now(UTC).isoformat(timespec="seconds"),
     }
-    recorder = Recorder(run_dir)
+    writer = log_writer(cfg)
+    manifest["log_writer"] = writer
+    recorder = Recorder(run_dir, writer=writer)
     swarm = progress = monitor = None
     dog = None
     discard = False
@@ -250,6 +252,29 @@ def _monitor(cfg: DictConfig, title: str):
     if not dashboard and not cfg.run.rerun:
         return None
     return live_monitor.create(title, cfg.run.monitor_hz, dashboard=dashboard, rerun=cfg.run.rerun)
+
+
+def log_writer(cfg: DictConfig) -> str:
+    """Where this run's log rows are encoded (``run.log_writer``). ``auto``: in a process of their own
+    when a core is free for it — a simulated run on a machine with two cores or more, not one of a
+    sweep's runs side by side (they already fill the cores); a real-time run waits on the clock
+    anyway, so its own thread does."""
+    mode = str(cfg.run.log_writer)
+    if mode != "auto":
+        return mode
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    realtime = bool(getattr(build.backend_class(cfg.backend), "realtime", False))
+    return "process" if cores >= 2 and not realtime and not _parallel_sweep() else "thread"
+
+
+def _parallel_sweep() -> bool:
+    """A multirun whose launcher may run several jobs at once (any launcher but Hydra's basic one)."""
+    if not _in_sweep():
+        return False
+    from hydra.core.hydra_config import HydraConfig
+
+    target = str(HydraConfig.get().launcher.get("_target_", ""))
+    return not target.endswith("BasicLauncher")
 
 
 def _in_sweep() -> bool:

@@ -8,15 +8,16 @@ import pyarrow.parquet as pq
 import pytest
 
 from swarmbox.record.schema import SCHEMA_VERSION
-from swarmbox.record.writer import Recorder
+from swarmbox.record.writer import WRITERS, Recorder
 
 
 def _event(tick: int, node: int, name: str = "x") -> tuple:
     return (tick * 0.025, tick, "marker", name, node, "{}")
 
 
-def test_rows_split_per_node_in_order_across_many_handovers(tmp_path):
-    rec = Recorder(tmp_path, flush_rows=7)          # a hand-over every few ticks
+@pytest.mark.parametrize("writer", WRITERS)
+def test_rows_split_per_node_in_order_across_many_handovers(tmp_path, writer):
+    rec = Recorder(tmp_path, flush_rows=7, writer=writer)   # a hand-over every few ticks
     logs = {n: rec.node(n).appender("events") for n in (-1, 0, 1, 2)}
     for tick in range(50):
         for node, append in logs.items():
@@ -34,8 +35,9 @@ def test_rows_split_per_node_in_order_across_many_handovers(tmp_path):
         assert names.get(7, "é") == "é" and names.get(8, "x") == "x"   # non-ASCII text survives
 
 
-def test_every_expected_file_exists_even_without_rows_and_nothing_else_is_left(tmp_path):
-    rec = Recorder(tmp_path)
+@pytest.mark.parametrize("writer", WRITERS)
+def test_every_expected_file_exists_even_without_rows_and_nothing_else_is_left(tmp_path, writer):
+    rec = Recorder(tmp_path, writer=writer)
     rec.node(-1)
     rec.node(3).appender("state")(
         (0.0, 0, 1, False, True, "manual", *(0.0,) * 6, *(math.nan,) * 6, 0.0, 1.0))
@@ -51,8 +53,9 @@ def test_every_expected_file_exists_even_without_rows_and_nothing_else_is_left(t
     assert not (tmp_path / ".spill").exists()
 
 
-def test_a_bad_row_fails_the_close_with_a_named_error_and_keeps_other_tables(tmp_path):
-    rec = Recorder(tmp_path, flush_rows=1)
+@pytest.mark.parametrize("writer", WRITERS)
+def test_a_bad_row_fails_the_close_with_a_named_error_and_keeps_other_tables(tmp_path, writer):
+    rec = Recorder(tmp_path, flush_rows=1, writer=writer)
     rec.node(0).appender("events")(("not a time", 0, "marker", "x", 0, "{}"))
     rec.node(0).appender("stages")((0.0, 0, 1, "ICEBREAK", ""))
     rec.maybe_flush()
@@ -62,10 +65,11 @@ def test_a_bad_row_fails_the_close_with_a_named_error_and_keeps_other_tables(tmp
     assert pq.read_table(tmp_path / "logs" / "drone_0" / "events.parquet").num_rows == 0
 
 
-def test_only_text_columns_are_dictionary_encoded(tmp_path):
+@pytest.mark.parametrize("writer", WRITERS)
+def test_only_text_columns_are_dictionary_encoded(tmp_path, writer):
     """Numbers (times, positions) rarely repeat: a dictionary tried on them first doubles a write's
     cost and bloats the file; text columns (kind, type, mode) compress far better with one."""
-    rec = Recorder(tmp_path, flush_rows=50)   # rows through the spill file and straight from memory
+    rec = Recorder(tmp_path, flush_rows=50, writer=writer)   # rows via the spill file and from memory
     append = rec.node(0).appender("messages")
     for tick in range(400):
         append((tick * 0.025, tick, "send" if tick % 2 else "recv", tick, "report", 0, -1, 120,

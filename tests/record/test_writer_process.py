@@ -1,0 +1,54 @@
+"""The log writer process: same files as the writer thread, and a clear error if it dies."""
+
+from __future__ import annotations
+
+import pyarrow.parquet as pq
+import pytest
+
+from swarmbox.record.writer import Recorder
+from tests.conftest import run_config
+
+
+def _tables(run_dir):
+    files = sorted((run_dir / "logs").rglob("*.parquet"))
+    return {p.relative_to(run_dir).as_posix(): pq.read_table(p) for p in files}
+
+
+def test_a_run_logs_the_same_tables_whichever_writer_encodes_them(tmp_path, monkeypatch):
+    # small hand-overs: most rows go through the spill file (the writer process's own, or the thread's)
+    monkeypatch.setattr(Recorder, "FLUSH_ROWS", 3000)
+    manifests, tables = {}, {}
+    for writer in ("thread", "process"):
+        run_dir = tmp_path / writer
+        manifests[writer] = run_config(run_dir, ["algo=formation", "mission=formation",
+                                                 f"run.log_writer={writer}"])
+        tables[writer] = _tables(run_dir)
+        assert not (run_dir / ".spill").exists()
+    assert manifests["process"]["log_writer"] == "process" and manifests["thread"]["log_writer"] == "thread"
+    assert manifests["process"]["status"] == manifests["thread"]["status"] == "ok"
+    assert tables["process"].keys() == tables["thread"].keys()
+    for name, table in tables["thread"].items():
+        other = tables["process"][name]
+        assert other.schema.equals(table.schema, check_metadata=True), name
+        assert other.to_pandas().equals(table.to_pandas()), name   # NaN where NaN
+
+
+def test_a_writer_process_that_dies_fails_the_close_naming_it(tmp_path):
+    rec = Recorder(tmp_path, flush_rows=5, writer="process")
+    append = rec.node(0).appender("stages")
+    for tick in range(10):
+        append((tick * 0.025, tick, 1, "ICEBREAK", ""))
+    rec.flush()
+    rec._handover.finish()   # the first chunk was sent: the process is up
+    rec._process._proc.kill()
+    rec._process._proc.wait()
+    with pytest.raises(OSError, match="log writer process"):
+        rec.close()
+
+
+def test_a_short_run_never_starts_the_process(tmp_path):
+    rec = Recorder(tmp_path, writer="process")
+    rec.node(0).appender("stages")((0.0, 0, 1, "ICEBREAK", ""))
+    rec.close()
+    assert not rec._process.started
+    assert pq.read_table(tmp_path / "logs" / "drone_0" / "stages.parquet").num_rows == 1

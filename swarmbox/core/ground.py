@@ -22,6 +22,7 @@ from swarmbox.core.proximity import DIRECT_PAIRS_UP_TO, Episode, ProximityTracke
 from swarmbox.core.stages import TERMINAL, Stage
 
 _ZERO3 = (0.0, 0.0, 0.0)
+_NO_DRONES: frozenset[int] = frozenset()
 # Enum members as globals for the per-tick paths (a class-attribute lookup costs several times more)
 _ICEBREAK, _PREPARATION, _EXECUTION = Stage.ICEBREAK, Stage.PREPARATION, Stage.EXECUTION
 
@@ -151,7 +152,7 @@ class GroundNode(Node):
         per level and fail with any drone on the way.
         """
         view = self.descendants()
-        before = {d for pair in self.prox_pairs for d in pair}
+        before = {d for pair in self.prox_pairs for d in pair} if self.prox_pairs else _NO_DRONES
         self.prox_pairs, started, ended = self.proximity.update(self.clock.now(), view)
         for ep in started:
             self._log_episode("prox_start", ep)

@@ -16,7 +16,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from itertools import chain
+from itertools import chain, combinations
 from operator import itemgetter
 
 import numpy as np
@@ -60,6 +60,8 @@ class ProximityTracker:
         if self.window_s > 0:
             self._velocities(now_s, view)
         alerted = self._alerted(view)
+        if not alerted and not self.active:   # the usual tick: nobody close, nothing open
+            return {}, [], []
         started, ended = [], []
         for pair, (dist, predicted) in alerted.items():
             ep = self.active.get(pair)
@@ -77,7 +79,9 @@ class ProximityTracker:
     def _alerted(self, view: tuple[DescendantState, ...]) -> dict[Pair, tuple[float, bool]]:
         if len(view) < 2:
             return {}
-        reach = self.distance_m + self.window_s * self._max_closing_speed()
+        reach = self.distance_m
+        if self.window_s:
+            reach += self.window_s * self._max_closing_speed()
         out: dict[Pair, tuple[float, bool]] = {}
         for a, b in self._near.pairs(view, reach):
             da, db = view[a], view[b]
@@ -177,6 +181,6 @@ class NeighbourList:
 
 
 def _pairs_within(view: tuple[DescendantState, ...], limit_m: float) -> list[tuple[int, int]]:
-    """Index pairs closer than ``limit_m`` (3-D), checking every pair (small swarms)."""
-    return [(a, b) for a in range(len(view)) for b in range(a + 1, len(view))
-            if math.dist(view[a].pos_ned_m, view[b].pos_ned_m) < limit_m]
+    """Index pairs closer than ``limit_m`` (3-D), checking every pair (small swarms), in index order."""
+    dist, points = math.dist, enumerate(map(_POS, view))
+    return [(a, b) for (a, pa), (b, pb) in combinations(points, 2) if dist(pa, pb) < limit_m]

@@ -276,7 +276,9 @@ class SimBackend:
         return ""
 
     def estimate_ned(self, i: int) -> tuple[float, float, float]:
-        """Vehicle ``i``'s estimated position (n, e, d)."""
+        """Vehicle ``i``'s estimated position (n, e, d): this step's telemetry has it, once built."""
+        if self._tel is not None:
+            return self._tel[i].pos_ned_m
         n, e, d = self._est[:, i].tolist()
         return (n, e, d)
 

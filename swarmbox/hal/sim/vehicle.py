@@ -137,7 +137,7 @@ class SimVehicle:
         if sp == self._last_ok and self.frozen is None:
             # the setpoint flown since last tick, passed unchanged then; in OFFBOARD and armed (any
             # mode change forgets it). Only the jump limit depends on the vehicle's state.
-            if sp.kind is not _POSITION or math.dist(sp.ned, self.telemetry().pos_ned_m) <= \
+            if sp.kind is not _POSITION or math.dist(sp.ned, self._fleet.estimate_ned(self.drone_id)) <= \
                     self._limits.max_jump_m:
                 return self._ok_verdict
         if self._refuse("setpoint"):

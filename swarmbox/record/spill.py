@@ -1,9 +1,10 @@
-"""The spill file of a run and its cut into per-node files (used by the recorder's thread or its process).
+"""The spill of a run and its cut into per-node files (used by the recorder's thread or its process).
 
-Chunks of rows (all nodes at once, each node's rows contiguous) are appended as row groups to a run-wide
-``<run>/.spill/<table>.parquet`` whose rows carry a ``node`` column. At the end the spill files and the
-rows still buffered are cut into ``logs/<node>/<table>.parquet``: zero-copy slices, each file written as
-``*.partial`` and renamed once complete, so a reader never sees half a file under its final name.
+Chunks of rows (all nodes at once, each node's rows contiguous) become record batches with a ``node``
+column: the first ``SpillFile.HOLD_BYTES`` of them are kept in memory, the rest appended as row groups
+to a run-wide ``<run>/.spill/<table>.parquet``. At the end the spill and the rows still buffered are cut
+into ``logs/<node>/<table>.parquet``: zero-copy slices, each file written as ``*.partial`` and renamed
+once complete, so a reader never sees half a file under its final name.
 """
 
 from __future__ import annotations
@@ -50,26 +51,44 @@ class Chunk:
 
 
 class SpillFile:
-    """Chunks in, Parquet row groups out; remembers where each node's rows went."""
+    """Chunks in, row groups out; remembers where each node's rows went.
 
-    def __init__(self, root: Path) -> None:
+    The first ``hold_bytes`` of record batches stay in memory (a short or small run never writes and
+    reads back a spill file); the rest are appended to the spill file as row groups.
+    """
+
+    HOLD_BYTES = 128 << 20
+
+    def __init__(self, root: Path, hold_bytes: int | None = None) -> None:
         self.root = root
+        self.hold_bytes = self.HOLD_BYTES if hold_bytes is None else hold_bytes
         self.writers: dict[str, pq.ParquetWriter] = {}
         self.layout: Layout = {}
+        #: per table, per entry of its layout: the batch held in memory, or None (next row group on disk)
+        self.held: dict[str, list[pa.RecordBatch | None]] = {}
+        self._held_bytes = 0
 
     def write(self, chunk: Chunk) -> None:
         node = np.repeat(np.asarray(chunk.nodes, np.int16), chunk.counts)
         data = chunk.batch(node)
-        writer = self.writers.get(chunk.table)
-        if writer is None:
-            self.root.mkdir(parents=True, exist_ok=True)
-            writer = pq.ParquetWriter(self.root / f"{chunk.table}.parquet", spill_schema(chunk.table),
-                                      compression="lz4", use_dictionary=text_columns(chunk.table))
-            self.writers[chunk.table] = writer
-        writer.write_batch(data, row_group_size=len(chunk))
+        if self._held_bytes + data.nbytes <= self.hold_bytes:
+            self._held_bytes += data.nbytes
+            self.held.setdefault(chunk.table, []).append(data)
+        else:
+            self._spill(chunk.table, data)
+            self.held.setdefault(chunk.table, []).append(None)
         offsets = np.concatenate([[0], np.cumsum(chunk.counts)[:-1]]).tolist()
         self.layout.setdefault(chunk.table, []).append(
             [(n, o, c) for n, o, c in zip(chunk.nodes, offsets, chunk.counts, strict=True)])
+
+    def _spill(self, table: str, data: pa.RecordBatch) -> None:
+        writer = self.writers.get(table)
+        if writer is None:
+            self.root.mkdir(parents=True, exist_ok=True)
+            writer = pq.ParquetWriter(self.root / f"{table}.parquet", spill_schema(table),
+                                      compression="lz4", use_dictionary=text_columns(table))
+            self.writers[table] = writer
+        writer.write_batch(data, row_group_size=len(data))
 
     def close(self) -> None:
         for writer in self.writers.values():
@@ -77,10 +96,11 @@ class SpillFile:
         self.writers.clear()
 
 
-def split(spill: Path, layout: Layout, tails: Mapping[str, Chunk], root: Path,
+def split(spill: SpillFile, tails: Mapping[str, Chunk], root: Path,
           nodes: Mapping[int, Sequence[str]]) -> list[str]:
-    """Cut spill files and buffered tails into ``<root>/<node>/<table>.parquet`` for every node and
-    each of its tables (``nodes``: node id -> table names); returns what could not be written."""
+    """Cut the (closed) spill's batches and buffered tails into ``<root>/<node>/<table>.parquet`` for
+    every node and each of its tables (``nodes``: node id -> table names); returns what could not be
+    written."""
     errors: list[str] = []
     with ThreadPoolExecutor(max_workers=2) as pool:
         for table in TABLES:
@@ -89,7 +109,7 @@ def split(spill: Path, layout: Layout, tails: Mapping[str, Chunk], root: Path,
                 continue
             pieces: dict[int, list[pa.Table]] = {}
             try:
-                _spilled(spill / f"{table}.parquet", layout.get(table, []), pieces)
+                _spilled(spill, table, pieces)
                 if table in tails:
                     _buffered(tails[table], pieces)
             except Exception as exc:  # noqa: BLE001 - keep going: other tables may be fine
@@ -108,12 +128,20 @@ def _buffered(chunk: Chunk, pieces: dict[int, list[pa.Table]]) -> None:
         offset += count
 
 
-def _spilled(path: Path, groups: list[list[tuple[int, int, int]]], pieces: dict[int, list[pa.Table]]) -> None:
+def _spilled(spill: SpillFile, table: str, pieces: dict[int, list[pa.Table]]) -> None:
+    groups = spill.layout.get(table, [])
     if not groups:
         return
-    data = pq.ParquetFile(path)
-    for index, spans in enumerate(groups):
-        group = data.read_row_group(index).drop_columns(["node"])
+    held_all = spill.held[table]
+    disk = None if all(h is not None for h in held_all) else pq.ParquetFile(spill.root / f"{table}.parquet")
+    on_disk = 0
+    for spans, held in zip(groups, held_all, strict=True):
+        if held is None:
+            group = disk.read_row_group(on_disk)
+            on_disk += 1
+        else:
+            group = pa.Table.from_batches([held])
+        group = group.drop_columns(["node"])
         for node, offset, count in spans:
             pieces.setdefault(node, []).append(group.slice(offset, count))
 

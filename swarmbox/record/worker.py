@@ -10,7 +10,7 @@ starts it at all.
 
 Protocol (pickled messages on stdin): ``("chunk", encoded)`` any number of times, then
 ``("close", [encoded tails], {node: tables}, logs_dir)``; the reply on stdout is the list of errors.
-``python -m swarmbox.record.worker SPILL_DIR`` runs the process side.
+``python -m swarmbox.record.worker SPILL_DIR HOLD_BYTES`` runs the process side.
 """
 
 from __future__ import annotations
@@ -46,8 +46,8 @@ def decode(data: tuple) -> Chunk:
 class WriterProcess:
     """The recorder's side: starts the process on first use, sends chunks, asks for the final cut."""
 
-    def __init__(self, spill_root: Path) -> None:
-        self.spill_root = spill_root
+    def __init__(self, spill_root: Path, hold_bytes: int) -> None:
+        self.spill_root, self.hold_bytes = spill_root, hold_bytes
         self._proc: subprocess.Popen | None = None
 
     @property
@@ -96,7 +96,8 @@ class WriterProcess:
         package_root = str(Path(__file__).resolve().parents[2])   # the directory holding swarmbox/
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
-        self._proc = subprocess.Popen([sys.executable, "-m", "swarmbox.record.worker", str(self.spill_root)],
+        self._proc = subprocess.Popen([sys.executable, "-m", "swarmbox.record.worker", str(self.spill_root),
+                                       str(self.hold_bytes)],
                                       stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
         with contextlib.suppress(ImportError, AttributeError, OSError):   # Linux: fewer, larger writes
             import fcntl
@@ -109,9 +110,9 @@ class WriterProcess:
         return "still running" if code is None else f"exit code {code}"
 
 
-def serve(spill_root: Path, inp: Any, out: Any) -> int:
-    """The process side: chunks into the spill file until ``close``; then the cut, and the errors."""
-    spill = SpillFile(spill_root)
+def serve(spill_root: Path, hold_bytes: int, inp: Any, out: Any) -> int:
+    """The process side: chunks into the spill until ``close``; then the cut, and the errors."""
+    spill = SpillFile(spill_root, hold_bytes)
     errors: list[str] = []
     while True:
         try:
@@ -133,7 +134,7 @@ def serve(spill_root: Path, inp: Any, out: Any) -> int:
         try:
             cut = {c.table: c for c in map(decode, tails)}
             errors = [f"log writer failed: {e}" for e in errors]
-            errors += split(spill_root, spill.layout, cut, Path(logs_root), nodes)
+            errors += split(spill, cut, Path(logs_root), nodes)
         except Exception as exc:  # noqa: BLE001 - reported to the run
             errors.append(f"cutting the logs: {type(exc).__name__}: {exc}")
         pickle.dump(errors, out)
@@ -146,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # Ctrl-C stops the run, which then closes its logs here
     out = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)   # anything printed by a library goes to stderr, never into the reply
-    return serve(Path(args[0]), sys.stdin.buffer, out)
+    return serve(Path(args[0]), int(args[1]), sys.stdin.buffer, out)
 
 
 if __name__ == "__main__":

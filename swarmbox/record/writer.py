@@ -98,7 +98,7 @@ class Recorder:
         self.logs: dict[int, NodeLog] = {}
         spill_root = self.run_dir / ".spill"
         self._spill = SpillFile(spill_root)
-        self._process = WriterProcess(spill_root) if writer == "process" else None
+        self._process = WriterProcess(spill_root, self._spill.hold_bytes) if writer == "process" else None
         if self._process is not None:
             self._handover = _HandOver(self._process.send, max_chunks, stop_on_error=True)
         else:
@@ -169,7 +169,7 @@ class Recorder:
                 errors += self._process.finish(list(tails.values()), nodes, self.root)
         else:
             self._spill.close()
-            errors += split(self._spill.root, self._spill.layout, tails, self.root, nodes)
+            errors += split(self._spill, tails, self.root, nodes)
         if not errors:
             shutil.rmtree(self._spill.root, ignore_errors=True)
         if errors:

@@ -8,6 +8,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from swarmbox.record.schema import SCHEMA_VERSION
+from swarmbox.record.spill import SpillFile
 from swarmbox.record.writer import WRITERS, Recorder
 
 
@@ -15,8 +16,11 @@ def _event(tick: int, node: int, name: str = "x") -> tuple:
     return (tick * 0.025, tick, "marker", name, node, "{}")
 
 
+@pytest.mark.parametrize("hold_bytes", [0, 3000, None])   # every batch on disk, some, none
 @pytest.mark.parametrize("writer", WRITERS)
-def test_rows_split_per_node_in_order_across_many_handovers(tmp_path, writer):
+def test_rows_split_per_node_in_order_across_many_handovers(tmp_path, monkeypatch, writer, hold_bytes):
+    if hold_bytes is not None:
+        monkeypatch.setattr(SpillFile, "HOLD_BYTES", hold_bytes)
     rec = Recorder(tmp_path, flush_rows=7, writer=writer)   # a hand-over every few ticks
     logs = {n: rec.node(n).appender("events") for n in (-1, 0, 1, 2)}
     for tick in range(50):
@@ -66,9 +70,10 @@ def test_a_bad_row_fails_the_close_with_a_named_error_and_keeps_other_tables(tmp
 
 
 @pytest.mark.parametrize("writer", WRITERS)
-def test_only_text_columns_are_dictionary_encoded(tmp_path, writer):
+def test_only_text_columns_are_dictionary_encoded(tmp_path, monkeypatch, writer):
     """Numbers (times, positions) rarely repeat: a dictionary tried on them first doubles a write's
     cost and bloats the file; text columns (kind, type, mode) compress far better with one."""
+    monkeypatch.setattr(SpillFile, "HOLD_BYTES", 0)
     rec = Recorder(tmp_path, flush_rows=50, writer=writer)   # rows via the spill file and from memory
     append = rec.node(0).appender("messages")
     for tick in range(400):

@@ -268,7 +268,7 @@ class AgentNode(Node):
         now = self.clock.now()
         if net.has_subscribers(node_id):
             succ = tuple(call_hook(self, "successors", self.algorithm.successors, self.ctx))
-            net.publish(Heartbeat(self.next_msg_id(), now, node_id, int(self.stage), succ,
+            net.publish(Heartbeat(self.next_msg_id(), now, node_id, self.stage_code, succ,
                                   tel.pos_ned_m, tel.vel_ned_m_s))
         disc = None
         if tel.gnss_seq != self._gnss_seq and tel.gnss_ned_m is not None:
@@ -283,7 +283,7 @@ class AgentNode(Node):
             total = alive = 0
             complete, below = self.complete, ()
         superior = self.superior
-        net.send(_new_report((self.next_msg_id(), now, node_id, superior, int(stage), complete,
+        net.send(_new_report((self.next_msg_id(), now, node_id, superior, self.stage_code, complete,
                               total + 1, alive + (stage is not _ABORT), tel.pos_ned_m, tel.vel_ned_m_s,
                               disc, self.report_data, below)), superior)
 
@@ -291,6 +291,6 @@ class AgentNode(Node):
         p, v = tel.pos_ned_m, tel.vel_ned_m_s
         g = tel.gnss_ned_m or _NAN3
         tp = tel.true_pos_ned_m or _NAN3
-        self._log_state((self.clock.now(), self.time.tick, int(self.stage), tel.armed, tel.landed,
+        self._log_state((self.clock.now(), self.time.tick, self.stage_code, tel.armed, tel.landed,
                          MODE_TEXT[tel.mode], p[0], p[1], p[2], v[0], v[1], v[2], g[0], g[1], g[2],
                          tp[0], tp[1], tp[2], tel.yaw_rad, tel.battery_frac))

@@ -58,7 +58,7 @@ class GroundNode(Node):
         self._drain_inbox()
         self.age_inferiors()
         self._advance(self._satisfied)
-        self.net.publish(Heartbeat(self.next_msg_id(), self.clock.now(), GROUND_ID, int(self.stage), (),
+        self.net.publish(Heartbeat(self.next_msg_id(), self.clock.now(), GROUND_ID, self.stage_code, (),
                                    _ZERO3, _ZERO3))
         self._proximity_alerts()
         stage = self.stage

@@ -86,6 +86,7 @@ class Node:
         self.timing, self.tick_s = timing, timing.tick_s
         self.mission, self.params, self.rng = mission, params, rng
         self.stage = Stage.ICEBREAK
+        self.stage_code = int(self.stage)   # the stage as a plain int (messages and logs carry it)
         self.stage_tick = -1          # the first tick counts 0, like every stage's entry tick
         self.finished = False
         self.inferiors: dict[int, _Inferior] = {}
@@ -114,8 +115,8 @@ class Node:
     # -- stages ---------------------------------------------------------------------------------
     def set_stage(self, stage: Stage, reason: str = "") -> None:
         check_transition(self.stage, stage)
-        self.stage, self.stage_tick = stage, 0
-        self._log_stage((self.clock.now(), self.time.tick, int(stage), stage.name, reason))
+        self.stage, self.stage_code, self.stage_tick = stage, int(stage), 0
+        self._log_stage((self.clock.now(), self.time.tick, self.stage_code, stage.name, reason))
 
     def stage_timed_out(self) -> bool:
         return self.stage_tick * self.tick_s > self.timing.timeouts_s[self.stage.name]

@@ -21,7 +21,7 @@ from swarmbox.core.agent import MODE_TEXT
 from swarmbox.core.clock import readings
 from swarmbox.record.blocks import StateBlocks
 
-_TELEMETRY, _STAGE = attrgetter("telemetry"), attrgetter("stage")
+_TELEMETRY, _STAGE = attrgetter("telemetry"), attrgetter("stage_code")
 _ARMED, _MODE = attrgetter("armed"), attrgetter("mode")
 
 

@@ -53,6 +53,9 @@ _DTYPES = {t: {c.name: c.dtype for c in cols} for t, cols in TABLES.items()}
 _READERS = 4
 #: Text columns read as pandas categoricals: few distinct values in the largest table.
 CATEGORICAL: dict[str, tuple[str, ...]] = {"messages": ("kind", "type", "reason")}
+#: Of those, the ones read straight as Parquet's dictionaries: no string is made per row, and the
+#: broadcast expansion copies indices. ``reason`` is parsed by that expansion, so it is read as text.
+_READ_AS_DICTIONARY: dict[str, tuple[str, ...]] = {"messages": ("kind", "type")}
 _DRONE = re.compile(r"drone_(\d+)")
 
 
@@ -149,8 +152,9 @@ def read_arrow(path: Path, table: str, node: int, problems: list[str],
     None and a problem line; an absent file gives None alone.
     """
     where = f"{path.parent.name}/{path.name}"
+    as_dictionary = _READ_AS_DICTIONARY.get(table, ())
     try:
-        pf = pq.ParquetFile(path)
+        pf = pq.ParquetFile(path, read_dictionary=as_dictionary)
         present = set(pf.schema_arrow.names)
         wanted = [c for c in TABLES[table] if columns is None or c.name in columns]
         names = [c.name for c in wanted if c.name in present]
@@ -171,8 +175,13 @@ def read_arrow(path: Path, table: str, node: int, problems: list[str],
     arrays, fields = [], []
     for col in wanted:
         typ = _ARROW[col.dtype]
+        if col.name in as_dictionary:
+            typ = pa.dictionary(pa.int32(), typ)
         if col.name in present:
-            arrays.append(data.column(col.name).cast(typ))
+            column = data.column(col.name)
+            if column.type != typ and pa.types.is_dictionary(typ):   # not text in the file: as before
+                column = pc.dictionary_encode(column.cast(typ.value_type))
+            arrays.append(column.cast(typ))
         else:
             problems.append(f"{where}: column {col.name!r} missing (filled with NA)")
             arrays.append(pa.nulls(len(data), typ))
@@ -186,14 +195,18 @@ def _to_frame(table: str, parts: list[pa.Table]) -> pd.DataFrame:
     """Concatenate Arrow parts and conform their columns once, as pandas.
 
     The text columns of :data:`CATEGORICAL` tables become pandas categoricals (Arrow dictionaries):
-    a handful of distinct words over millions of rows, one byte a row instead of a string each.
+    a handful of distinct words over millions of rows, one byte a row instead of a string each. The
+    categories are in order of first appearance, however the files' dictionaries were ordered.
     """
     data = pa.concat_tables(parts)
     parts.clear()   # the caller's list: let the per-node tables go as soon as they are joined
     for name in CATEGORICAL.get(table, ()):
         if name in data.column_names:
             i = data.column_names.index(name)
-            data = data.set_column(i, name, pc.fill_null(data.column(name), "").dictionary_encode())
+            column = data.column(name)
+            if not pa.types.is_dictionary(column.type) or column.null_count:
+                column = pc.fill_null(column.cast(pa.string()), "").dictionary_encode()
+            data = data.set_column(i, name, column)
     # self_destruct frees each Arrow column once converted: peak memory ~1x the frame, not 2x
     frame = data.to_pandas(self_destruct=True, split_blocks=True)
     del data
@@ -203,10 +216,24 @@ def _to_frame(table: str, parts: list[pa.Table]) -> pd.DataFrame:
     return frame
 
 
+def _first_seen(series: pd.Series) -> pd.Series:
+    """A categorical with its categories in order of first appearance, the unused ones dropped."""
+    codes = series.cat.codes.to_numpy()
+    seen = pd.unique(codes)
+    if len(seen) == len(series.cat.categories) and (seen == np.arange(len(seen))).all():
+        return series
+    remap = np.zeros(len(series.cat.categories), dtype=codes.dtype)
+    remap[seen] = np.arange(len(seen))
+    return pd.Series(pd.Categorical.from_codes(remap[codes], series.cat.categories[seen]),
+                     index=series.index, name=series.name)
+
+
 def _conform(series: pd.Series, dtype: str) -> pd.Series:
     target = _PANDAS_DTYPE[dtype]
     if isinstance(series.dtype, pd.CategoricalDtype):
-        return series   # text as a dictionary, nulls already filled with ""
+        return _first_seen(series)   # text as a dictionary, nulls already filled with ""
+    if target != "str" and series.dtype == np.dtype(target):
+        return series   # numbers arrive as the schema's type unless they hold nulls: nothing to do
     missing = series.isna()
     if target == "str":
         if series.dtype == "str" and not missing.any():

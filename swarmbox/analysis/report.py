@@ -35,6 +35,10 @@ class AnalysisOptions:
     min_deviation: dict[str, float] = field(default_factory=dict)   # overrides per monitored metric
     fault_onset_u: float | None = None  # overrides the fault event (unified time, s)
     fault_target: int | None = None
+    #: Compute only what the scalars need (a sweep reads nothing else): the links, the markers and,
+    #: when there is no fault onset, the timeline and the flags are left empty, and the agents (and
+    #: drones) get only their tx/rx rates, not their latency and loss. Same scalars.
+    scalars_only: bool = False
 
     def tests(self) -> dict[str, anomaly.OutlierTest]:
         return anomaly.default_tests(self.iqr_k, self.min_deviation)
@@ -42,7 +46,8 @@ class AnalysisOptions:
 
 @dataclass
 class RunAnalysis:
-    """Every table and scalar computed for one run."""
+    """Every table and scalar computed for one run (with :attr:`AnalysisOptions.scalars_only`, some
+    tables are empty or partial)."""
 
     run: RunData
     clocks: pd.DataFrame
@@ -134,22 +139,24 @@ def analyze_run(source: str | Path | RunData, opts: AnalysisOptions | None = Non
     span = window or metrics.ExecWindow(_first_time(run), _last_time(run), False)
     flow = network.message_flow(run.tables["messages"], _tick_s(run))
     exec_flow = network.between(flow, span.start, span.end)
-    links = network.link_stats(exec_flow, span.duration)
-    agents = network.agent_stats(exec_flow, span.duration)
+    full = not opts.scalars_only
+    links = network.link_stats(exec_flow, span.duration) if full else pd.DataFrame()
+    agents = (network.agent_stats if full else network.agent_traffic)(exec_flow, span.duration)
     disc = metrics.discrepancy(run.tables["state"])
     per_drone = _drone_table(run, window, span, agents, disc)
-    timeline = drone_timeline(flow, disc, run.drones, opts.window_s)
+    onset = _onset(run, opts)
+    flagged = full or onset is not None   # the flags feed the scalars through the diagnosis only
+    timeline = drone_timeline(flow, disc, run.drones, opts.window_s) if flagged else pd.DataFrame()
     swarm = metrics.swarm_timeline(run.tables["state"], run.drones)
     connectivity = network.connectivity_timeline(flow, run.nodes, opts.graph_window_s)
-    flags = anomaly.detect(timeline, opts.tests())
-    onset = _onset(run, opts)
+    flags = anomaly.detect(timeline, opts.tests()) if flagged else pd.DataFrame()
     diagnosis = anomaly.diagnose(flags, onset) if onset else pd.DataFrame()
     scalars = _scalars(run, window, span, per_drone, exec_flow, swarm, connectivity, opts)
     scalars |= anomaly.diagnosis_scalars(diagnosis)
     specs = mission.parse_specs(run.config, run.problems)
     mission_values, directions = mission.mission_metrics(run.tables["events"], specs, span.start)
     scalars |= mission_values
-    markers = mission.marker_table(run.tables["events"], specs, span.start)
+    markers = mission.marker_table(run.tables["events"], specs, span.start) if full else pd.DataFrame()
     return RunAnalysis(run, clocks, window, flow, links, agents, per_drone, timeline, swarm, connectivity,
                        flags, diagnosis, markers, onset, scalars, directions)
 

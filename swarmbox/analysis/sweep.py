@@ -30,7 +30,7 @@ import logging
 import warnings
 import zlib
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -75,7 +75,10 @@ class SweepResult:
 
 
 def _analyze_one(run_dir: Path, root: Path, opts: AnalysisOptions) -> dict:
-    """One run's table row, problems, declared directions and choice names (runs in a worker)."""
+    """One run's table row, problems, declared directions and choice names (runs in a worker).
+
+    Only the scalars are read, so the tables that feed none are not computed (``scalars_only``).
+    """
     rel = str(run_dir.relative_to(root)) if run_dir != root else "."
     out: dict = {"row": None, "problems": [], "directions": {}, "choices": []}
     try:
@@ -89,7 +92,7 @@ def _analyze_one(run_dir: Path, root: Path, opts: AnalysisOptions) -> dict:
         out["problems"] += [{"run": rel, "severity": "skipped", "problem": skip}, *notes]
         return out
     try:
-        analysis = analyze_run(run, opts)
+        analysis = analyze_run(run, replace(opts, scalars_only=True))
     except Exception as exc:  # noqa: BLE001 - one bad run must not stop the sweep
         log.exception("analysis of %s failed", run_dir)
         out["problems"].append({"run": rel, "severity": "skipped", "problem": f"analysis failed: {exc!r}"})

@@ -51,15 +51,21 @@ class PairEstimate:
     method: str         # two-way | one-way
 
 
+def _int64(values: np.ndarray) -> np.ndarray:
+    """As pandas casts: an unknown (NaN) id raises rather than becoming a number."""
+    return pd.Series(values, copy=False).astype("int64").to_numpy()
+
+
 def clock_samples(messages: pd.DataFrame) -> pd.DataFrame:
     """One row per received message: ``a`` sender, ``b`` receiver, ``t_a`` (sender clock), ``sample``."""
-    recv = messages[(messages["kind"] == "recv") & (messages["node"] != NET)]
-    recv = recv[np.isfinite(recv["t_s"]) & np.isfinite(recv["t_sent_s"])]
-    return pd.DataFrame({
-        "a": recv["src"].astype("int64").to_numpy(), "b": recv["node"].astype("int64").to_numpy(),
-        "t_a": recv["t_sent_s"].to_numpy(), "t_b": recv["t_s"].to_numpy(),
-        "sample": (recv["t_s"] - recv["t_sent_s"]).to_numpy(),
-    })
+    node = messages["node"].to_numpy()
+    t_b = messages["t_s"].to_numpy(dtype=np.float64)
+    t_a = messages["t_sent_s"].to_numpy(dtype=np.float64)
+    keep = (messages["kind"] == "recv").to_numpy(dtype=bool) & (node != NET)
+    keep &= np.isfinite(t_b) & np.isfinite(t_a)
+    t_a, t_b = t_a[keep], t_b[keep]
+    return pd.DataFrame({"a": _int64(messages["src"].to_numpy()[keep]), "b": _int64(node[keep]),
+                         "t_a": t_a, "t_b": t_b, "sample": t_b - t_a})
 
 
 def window_minima(fwd: pd.DataFrame, bwd: pd.DataFrame, window_s: float) -> pd.DataFrame:
@@ -82,37 +88,46 @@ def window_minima(fwd: pd.DataFrame, bwd: pd.DataFrame, window_s: float) -> pd.D
 def all_window_minima(samples: pd.DataFrame, window_s: float) -> dict[tuple[int, int], pd.DataFrame]:
     """:func:`window_minima` of every node pair (a < b) heard at least one way, in one grouping.
 
-    One pass over all samples instead of one per pair: the cost is linear in the messages, whatever
-    the number of nodes.
+    One sort of all samples by (pair, window) instead of one pass per pair: the cost is linear in the
+    messages (n log n), whatever the number of nodes; the windows of a pair are in time order.
     """
     samples = samples[samples["a"] != samples["b"]]
-    fwd = samples["a"].to_numpy() < samples["b"].to_numpy()
-    lo = np.where(fwd, samples["a"], samples["b"])
-    hi = np.where(fwd, samples["b"], samples["a"])
+    a, b = samples["a"].to_numpy(), samples["b"].to_numpy()
+    fwd = a < b
+    lo, hi = np.where(fwd, a, b), np.where(fwd, b, a)
     t = np.where(fwd, samples["t_a"], samples["t_b"])   # both directions on the clock of ``lo``
     sample = samples["sample"].to_numpy()
-    parts = pd.DataFrame({"lo": lo, "hi": hi, "t": t, "w": np.floor(t / window_s),
-                          "fwd": np.where(fwd, sample, np.nan), "bwd": np.where(fwd, np.nan, sample)})
-    out = parts.groupby(["lo", "hi", "w"], sort=True).agg(
-        fwd=("fwd", "min"), bwd=("bwd", "min"), t_lo=("t", "min"), t_hi=("t", "max"))
-    out["t_mid"] = (out["t_lo"] + out["t_hi"]) / 2
-    out = out.reset_index(level="w", drop=True)
-    return {(int(a), int(b)): g.reset_index(drop=True) for (a, b), g in out.groupby(level=[0, 1], sort=True)}
+    w = np.floor(t / window_s)
+    order = np.lexsort((w, hi, lo))
+    lo, hi, w, t = lo[order], hi[order], w[order], t[order]
+    pair = np.concatenate([[True], (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])])
+    starts = np.flatnonzero(pair | np.concatenate([[True], w[1:] != w[:-1]]))
+    if not len(starts):
+        return {}
+    t_lo, t_hi = np.minimum.reduceat(t, starts), np.maximum.reduceat(t, starts)
+    table = {"fwd": np.fmin.reduceat(np.where(fwd, sample, np.nan)[order], starts),   # NaN-skipping min
+             "bwd": np.fmin.reduceat(np.where(fwd, np.nan, sample)[order], starts),
+             "t_lo": t_lo, "t_hi": t_hi, "t_mid": (t_lo + t_hi) / 2}
+    first = np.flatnonzero(pair[starts])   # the first window of each pair
+    bounds = [*first.tolist(), len(starts)]
+    return {(int(lo[starts[i]]), int(hi[starts[i]])): pd.DataFrame({k: v[i:j] for k, v in table.items()})
+            for i, j in zip(bounds[:-1], bounds[1:], strict=True)}
 
 
 def two_way_estimate(a: int, b: int, win: pd.DataFrame, opts: ClockOptions) -> PairEstimate | None:
     """Relative clock of b with respect to a from the windows where both directions were heard."""
-    both = win.dropna(subset=["fwd", "bwd"])
-    if both.empty:
+    fwd, bwd, t_mid = (win[c].to_numpy(dtype=np.float64) for c in ("fwd", "bwd", "t_mid"))
+    both = ~np.isnan(fwd) & ~np.isnan(bwd)
+    n = int(both.sum())
+    if not n:
         return None
-    rel = ((both["fwd"] - both["bwd"]) / 2).to_numpy()
-    delay = float(np.median((both["fwd"] + both["bwd"]) / 2))
-    t_mid = both["t_mid"].to_numpy()
-    if len(both) >= opts.min_drift_windows and np.ptp(t_mid) > 0:
+    fwd, bwd, t_mid = fwd[both], bwd[both], t_mid[both]
+    rel = (fwd - bwd) / 2
+    delay = float(np.median((fwd + bwd) / 2))
+    if n >= opts.min_drift_windows and np.ptp(t_mid) > 0:
         slope, intercept, _, _ = stats.theilslopes(rel, t_mid)
     else:
         slope, intercept = 0.0, float(np.median(rel))
-    n = len(both)
     return PairEstimate(a, b, float(intercept), float(slope), delay, float(n), n, "two-way")
 
 
@@ -195,12 +210,22 @@ def estimate_clocks(messages: pd.DataFrame, nodes: list[int],
 
 
 def to_unified(t_local: pd.Series, node: pd.Series, clocks: pd.DataFrame) -> pd.Series:
-    """Map node-local times to ground time with each node's estimated offset and drift."""
-    idx = clocks.set_index("node")
-    node = node.astype("int64")
-    off = node.map(idx["offset_s"]).fillna(0.0).astype("float64")
-    drift = node.map(idx["drift_ppm"]).fillna(0.0).astype("float64") * 1e-6
-    return (t_local.astype("float64") - off) / (1.0 + drift)
+    """Map node-local times to ground time with each node's estimated offset and drift (a node with
+    no estimate, or a NaN one, keeps 0)."""
+    ids = clocks["node"].to_numpy(dtype=np.int64)
+    order = np.argsort(ids, kind="stable")
+    ids = ids[order]
+    nodes = node.astype("int64").to_numpy()
+    slot = np.searchsorted(ids, nodes)   # a few nodes: a short binary search
+    slot[(slot == len(ids)) | (np.append(ids, 0)[slot] != nodes)] = len(ids)   # unknown: the 0 appended
+
+    def per_row(column: str) -> np.ndarray:
+        values = clocks[column].to_numpy(dtype=np.float64)[order]
+        return np.append(np.where(np.isnan(values), 0.0, values), 0.0)[slot]
+
+    drift = per_row("drift_ppm") * 1e-6
+    return pd.Series((t_local.to_numpy(dtype=np.float64) - per_row("offset_s")) / (1.0 + drift),
+                     index=t_local.index)
 
 
 def unify(run: RunData, opts: ClockOptions | None = None) -> pd.DataFrame:

@@ -1,6 +1,7 @@
-"""The Arrow message flow equals the former pandas merge, row for row, on runs with loss and latency.
+"""The message flow equals the former pandas merge, row for row, on runs with loss and latency and on
+messy hand-made logs.
 
-``reference_flow`` is the pandas implementation the analyzer used before the matching moved to Arrow,
+``reference_flow`` is the pandas implementation the analyzer used before the matching moved to arrays,
 kept here verbatim as the oracle.
 """
 
@@ -82,7 +83,81 @@ def test_duplicates_missing_times_and_unlogged_destinations():
     assert _same(msgs.iloc[:0], 0.025).empty
 
 
-def test_network_module_uses_the_arrow_flow(make_run):
+def _messy_messages(seed: int, id_base: int = 1 << 40, text: str = "category") -> pd.DataFrame:
+    """Sends (a few repeated, a few without a time) from 4 logged nodes and to an unlogged one, receives
+    repeated with other times, late or without a time, and repeated network drops with different
+    reasons; rows in no particular order."""
+    rng = np.random.default_rng(seed)
+    n = 400
+    src = rng.integers(0, 4, n)
+    dst = (src + rng.integers(1, 4, n)) % 4
+    dst[rng.random(n) < 0.05] = 9                                   # a destination that logs nothing
+    msg_id = id_base * (src + 1) + rng.permutation(n)
+    t_send = np.round(rng.uniform(0, 10, n) / 0.025) * 0.025         # ticks: many equal send times
+    t_send[rng.random(n) < 0.03] = np.nan
+    sends = pd.DataFrame({"kind": "send", "msg_id": msg_id, "node": src, "src": src, "dst": dst, T: t_send})
+    sends = pd.concat([sends, sends.sample(10, random_state=seed)])   # the same send logged twice
+    got = sends[(rng.random(len(sends)) < 0.8) & (sends["dst"] != 9)]
+    recvs = got.assign(kind="recv", node=got["dst"], **{T: got[T] + rng.uniform(0.001, 0.2, len(got))})
+    again = recvs.sample(60, random_state=seed + 1)                 # re-delivered copies, earlier or later
+    again = again.assign(**{T: again[T] + rng.uniform(-0.1, 0.5, len(again))})
+    blind = recvs.sample(10, random_state=seed + 2).assign(**{T: np.nan})
+    missed = sends[~sends.index.isin(got.index)].drop_duplicates(["msg_id", "dst"])
+    drops = missed.sample(frac=0.7, random_state=seed).assign(kind="drop", node=NET, reason="loss")
+    twice = drops.sample(frac=0.3, random_state=seed).assign(reason="queue")
+    msgs = pd.concat([sends, recvs, again, blind, drops, twice], ignore_index=True)
+    msgs = msgs.sample(frac=1.0, random_state=seed).reset_index(drop=True)
+    msgs["type"] = rng.choice(["report", "heartbeat", "task"], len(msgs))
+    msgs["reason"] = msgs["reason"].fillna("")
+    msgs["nbytes"] = rng.integers(10, 200, len(msgs)).astype("int32")
+    for col in ("node", "src", "dst"):
+        msgs[col] = msgs[col].astype("int16")
+    for col in ("kind", "type", "reason"):
+        msgs[col] = msgs[col].astype(text)
+    return msgs
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_messy_logs_equal_the_reference(seed):
+    msgs = _messy_messages(seed)
+    got = _same(msgs, 0.025)
+    assert got["lost"].any() and got["drop_reason"].eq("loss").any() and got["drop_reason"].eq("queue").any()
+    assert (~got["counted"]).any() and got["t_send"].isna().any()
+
+
+@pytest.mark.parametrize("text", ["str", "category"])
+def test_text_columns_and_far_apart_ids(text):
+    """Text as plain strings or categoricals; message ids too far apart to pack with the node as they are."""
+    _same(_messy_messages(7, text=text), 0.025)
+    far = _same(_messy_messages(8, id_base=1 << 61), 0.0)
+    assert far["msg_id"].max() > 1 << 62 and far["delivered"].any()
+    _same(_messy_messages(9, id_base=-(1 << 61)), 0.0)
+
+
+@pytest.mark.parametrize(("a_scale", "b_scale"), [(1, 1), (1 << 60, 1), (1, 1 << 61), (1 << 60, 1 << 61)])
+def test_pair_keys_are_exact_and_ordered(a_scale, b_scale):
+    """Equal keys exactly for equal pairs, ordered by (a, b), across the arrays, near int64's limits too."""
+    rng = np.random.default_rng(0)
+    a, b = rng.integers(-6, 6, 500) * a_scale, rng.integers(-3, 4, 500) * b_scale
+    keys = np.concatenate(flow.pair_keys([(a[:200], b[:200]), (a[200:], b[200:]), (a[:0], b[:0])]))
+    np.testing.assert_array_equal(np.argsort(keys, kind="stable"), np.lexsort((b, a)))
+    assert len(np.unique(keys)) == len(set(zip(a.tolist(), b.tolist(), strict=True)))
+
+
+def test_unknown_ids_match_nothing():
+    """A row whose msg_id or destination is unknown (NaN) is never matched; its send stays, as NaN."""
+    rows = [("send", 1.0, 0, 1, 0.0), ("recv", 1.0, 1, 1, 0.01), ("send", np.nan, 0, 1, 0.1),
+            ("recv", np.nan, 1, 1, 0.11), ("send", 3.0, 0, np.nan, 0.2), ("recv", 3.0, 1, 1, 0.21)]
+    msgs = pd.DataFrame([{"kind": k, "msg_id": m, "node": n, "dst": d, T: t, "type": "report", "src": 0,
+                          "nbytes": 10, "reason": ""} for k, m, n, d, t in rows])
+    msgs["node"] = msgs["node"].astype("int16")
+    got = flow.message_flow(msgs, 0.0)
+    assert got["msg_id"].dtype == "float64" and got["dst"].dtype == "float64"
+    assert got["delivered"].tolist() == [True, False, False]
+    assert got["counted"].tolist() == [True, True, False]   # no destination: nothing can be said
+
+
+def test_network_module_uses_the_array_flow(make_run):
     run = load_run(make_run(drop_every={1: 4}))
     unify(run)
     pd.testing.assert_frame_equal(network.message_flow(run.tables["messages"], 0.025),

@@ -144,7 +144,9 @@ def serve(spill_root: Path, hold_bytes: int, inp: Any, out: Any) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
-    signal.signal(signal.SIGINT, signal.SIG_IGN)   # Ctrl-C stops the run, which then closes its logs here
+    # Ctrl-C and SIGTERM stop the run, which then closes its logs here; if the run dies, stdin ends
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     out = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)   # anything printed by a library goes to stderr, never into the reply
     return serve(Path(args[0]), int(args[1]), sys.stdin.buffer, out)

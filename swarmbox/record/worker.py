@@ -43,25 +43,41 @@ def decode(data: tuple) -> Chunk:
     return Chunk(table, nodes, counts, marshal.loads(rows) if rows is not None else [], batch)
 
 
+class WriterUnavailable(Exception):
+    """The writer process could not take the first chunk (it did not start, or exited at once)."""
+
+
 class WriterProcess:
     """The recorder's side: starts the process on first use, sends chunks, asks for the final cut."""
 
     def __init__(self, spill_root: Path, hold_bytes: int) -> None:
         self.spill_root, self.hold_bytes = spill_root, hold_bytes
         self._proc: subprocess.Popen | None = None
+        self._sent = 0   # chunks the process has taken
 
     @property
     def started(self) -> bool:
         return self._proc is not None
 
     def send(self, chunk: Chunk) -> None:
-        """Called on the recorder's thread: blocks while the process is behind (the pipe is full)."""
+        """Called on the recorder's thread: blocks while the process is behind (the pipe is full).
+
+        Raises :class:`WriterUnavailable` when the process cannot be started or dies before taking
+        its first chunk (nothing is lost: the caller can write the chunk itself), OSError when it
+        dies later."""
         if self._proc is None:
-            self._start()
+            try:
+                self._start()
+            except OSError as exc:
+                raise WriterUnavailable(f"cannot start {sys.executable}: {exc}") from exc
         try:
             self._write(("chunk", encode(chunk)))
         except OSError as exc:
+            if not self._sent:
+                self.kill()
+                raise WriterUnavailable(f"it exited at start ({self._exit_note()})") from exc
             raise OSError(f"log writer process gone ({self._exit_note()})") from exc
+        self._sent += 1
 
     def _write(self, message: tuple) -> None:
         """One message, in as few system calls as the pipe allows: the lock is released during each,

@@ -17,6 +17,7 @@ partial logs survive.
 
 from __future__ import annotations
 
+import logging
 import queue
 import shutil
 import threading
@@ -28,7 +29,9 @@ import numpy as np
 from swarmbox.record.blocks import StateBlocks
 from swarmbox.record.schema import node_name
 from swarmbox.record.spill import TABLES, Chunk, SpillFile, split
-from swarmbox.record.worker import WriterProcess
+from swarmbox.record.worker import WriterProcess, WriterUnavailable
+
+log = logging.getLogger(__name__)
 
 GROUND_TABLES = ("messages", "stages", "events")
 DRONE_TABLES = ("state", "messages", "stages", "events", "setpoints")
@@ -100,10 +103,32 @@ class Recorder:
         self._spill = SpillFile(spill_root)
         self._process = WriterProcess(spill_root, self._spill.hold_bytes) if writer == "process" else None
         if self._process is not None:
-            self._handover = _HandOver(self._process.send, max_chunks, stop_on_error=True)
+            self._handover = _HandOver(self._to_process, max_chunks, stop_on_error=True)
         else:
             self._handover = _HandOver(self._spill.write, max_chunks, stop_on_error=False)
         self._blocks = StateBlocks()
+        self._unavailable = ""
+
+    @property
+    def writer(self) -> str:
+        """Where the rows are encoded: ``thread``, ``process``, or the thread after a failed start."""
+        if self._unavailable:
+            return f"thread (writer process unavailable: {self._unavailable})"
+        return "process" if self._process is not None else "thread"
+
+    def _to_process(self, chunk: Chunk) -> None:
+        """The hand-over thread's sink with a writer process: a process that cannot start leaves the
+        work to this thread, as with ``writer="thread"`` (nothing was sent to it, nothing is lost)."""
+        if self._process is not None:
+            try:
+                self._process.send(chunk)
+                return
+            except WriterUnavailable as exc:
+                self._unavailable = str(exc)
+                log.warning("log writer process unavailable (%s): rows are encoded by the run's own thread",
+                            exc)
+                self._process = None
+        self._spill.write(chunk)
 
     def node(self, node_id: int) -> NodeLog:
         if node_id not in self.logs:

@@ -240,6 +240,7 @@ def _close(manifest: dict[str, Any], swarm: Swarm | None, recorder: Recorder, ru
         try:
             with gc_paused():
                 recorder.close()
+            manifest["log_writer"] = recorder.writer
         except OSError as exc:
             manifest.update(status="failed", reason=f"{manifest['reason']}; {exc}".strip("; "))
         write_atomic(run_dir / "run.json", json.dumps(manifest, indent=2, sort_keys=True))

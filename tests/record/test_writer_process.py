@@ -52,3 +52,16 @@ def test_a_short_run_never_starts_the_process(tmp_path):
     rec.close()
     assert not rec._process.started
     assert pq.read_table(tmp_path / "logs" / "drone_0" / "stages.parquet").num_rows == 1
+
+
+def test_a_writer_process_that_cannot_start_leaves_the_rows_to_the_thread(tmp_path, monkeypatch):
+    monkeypatch.setattr("sys.executable", str(tmp_path / "no-such-python"))
+    rec = Recorder(tmp_path, flush_rows=5, writer="process")
+    append = rec.node(0).appender("stages")
+    for tick in range(20):
+        append((tick * 0.025, tick, 1, "ICEBREAK", ""))
+        rec.maybe_flush()
+    rec.close()
+    assert rec.writer.startswith("thread (writer process unavailable: cannot start")
+    ticks = pq.read_table(tmp_path / "logs" / "drone_0" / "stages.parquet").column("tick").to_pylist()
+    assert ticks == list(range(20))

@@ -90,12 +90,6 @@ def _path(t: np.ndarray, true: np.ndarray, est: np.ndarray) -> tuple[float, floa
     return float(np.hypot(step[:, 0], step[:, 1]).sum()), float(np.linalg.norm(step, axis=1).sum()), source
 
 
-def path_length(rows: pd.DataFrame) -> tuple[float, float, str]:
-    """Horizontal and 3-D path length over the (time-sorted) samples, and the position source."""
-    return _path(rows[T].to_numpy(dtype="float64"), rows[_TRUE].to_numpy(dtype="float64"),
-                 rows[_EST].to_numpy(dtype="float64"))
-
-
 def completion_time(events: pd.DataFrame, drone: int) -> float:
     """Start of the drone's final complete streak (NaN if it never completed or flipped back last)."""
     return _completion(events[events["node"] == drone])

@@ -148,9 +148,7 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         "versions": _versions(), "git_sha": _git_sha(),
         "started_at": datetime.now(UTC).isoformat(timespec="seconds"),
     }
-    writer = log_writer(cfg)
-    manifest["log_writer"] = writer
-    recorder = Recorder(run_dir, writer=writer)
+    recorder = Recorder(run_dir, writer=log_writer(cfg))
     swarm = progress = monitor = None
     dog = None
     discard = False
@@ -240,9 +238,9 @@ def _close(manifest: dict[str, Any], swarm: Swarm | None, recorder: Recorder, ru
         try:
             with gc_paused():
                 recorder.close()
-            manifest["log_writer"] = recorder.writer
         except OSError as exc:
             manifest.update(status="failed", reason=f"{manifest['reason']}; {exc}".strip("; "))
+        manifest["log_writer"] = recorder.writer   # where the rows were encoded, in the end
         write_atomic(run_dir / "run.json", json.dumps(manifest, indent=2, sort_keys=True))
 
 

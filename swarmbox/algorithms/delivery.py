@@ -127,9 +127,10 @@ class DeliveryGround(GroundAlgorithm):
             ctx.send_task(drone, code=END)
 
     def exec_loop(self, ctx: GroundContext) -> None:
-        for drone in sorted(ctx.reports):
-            data = ctx.reports[drone].data
-            if data == self._seen.get(drone):
+        seen = self._seen
+        for drone, report in sorted(ctx.reports.items()):
+            data = report.data
+            if data == seen.get(drone):
                 continue
             self._seen[drone] = data
             for pid in decode_ids(data):

@@ -105,9 +105,11 @@ class SimBackend:
         """Truth, estimate and scratch arrays; every vehicle on the ground at its home."""
         n = len(homes)
         # state is axis-first (3, N); the public (N, 3) names are transposed views of it
-        self._pos, self._vel = np.zeros((3, n)), np.zeros((3, n))
+        # estimate, velocity and truth are row blocks of one array: telemetry reads them in one call
+        self._kin = np.zeros((9, n))
+        self._est, self._vel, self._pos = self._kin[0:3], self._kin[3:6], self._kin[6:9]
         ned_xy(self._pos)[...] = ned_xy(homes.T)              # d = 0: on the ground
-        self._est = self._pos.copy()
+        self._est[...] = self._pos
         self.true_pos_ned_m, self.true_vel_ned_m_s, self.est_pos_ned_m = self._pos.T, self._vel.T, self._est.T
         self._pos_d, self._vel_d = self._pos[2], self._vel[2]
         self.airborne = np.zeros(n)                           # 1.0 flying, 0.0 on the ground
@@ -303,11 +305,12 @@ class SimBackend:
         the end of the estimator's start-up, so they are rebuilt only then."""
         t, vehicles, n = self.t_s, self.vehicles, self.n
         fixes, seq, ready = self._gnss_lists(t)
+        en, ee, ed, vn, ve, vd, pn, pe, pd = self._kin.tolist()
         self._tel = list(map(_new_telemetry, zip(
-            repeat(t, n), zip(*self._est.tolist(), strict=True), zip(*self._vel.tolist(), strict=True),
+            repeat(t, n), zip(en, ee, ed, strict=True), zip(vn, ve, vd, strict=True),
             self.ctrl.yaw_rad.tolist(), fixes, seq, list(map(_ARMED, vehicles)),
             (self.airborne == 0.0).tolist(), list(map(_MODE, vehicles)), self.battery_frac().tolist(),
-            ready, zip(*self._pos.tolist(), strict=True), repeat(True, n),
+            ready, zip(pn, pe, pd, strict=True), repeat(True, n),
             strict=False)))   # the repeats are as long as the fleet
         return self._tel
 
@@ -330,8 +333,7 @@ class SimBackend:
             b = self._battery
             np.divide(self._air_s, self.params.battery_endurance_s, out=b)
             np.subtract(1.0, b, out=b)
-            np.maximum(b, 0.0, out=b)   # = np.clip(b, 0, 1): b is finite
-            np.minimum(b, 1.0, out=b)
+            np.maximum(b, 0.0, out=b)   # = np.clip(b, 0, 1): the time in the air is >= 0, so b <= 1
             self._battery_ok = True
         return self._battery
 

@@ -77,6 +77,7 @@ class CascadedController:
         self.yaw_rad, self.yaw_tgt_rad = np.zeros(n), np.zeros(n)
         self._yaw_busy = False
         self._yaw_err = np.zeros_like(self.yaw_rad)
+        self._yaw_step = (np.zeros(()), np.zeros(()))   # (step, -step) per tick, set with the gains
         self.acc_ned_m_s2 = z3()
         self._att_acc = np.zeros((2, n))   # horizontal acceleration the attitude has reached so far
         self._att_alpha = 1.0
@@ -171,6 +172,8 @@ class CascadedController:
         # constant 1/MC_ROLL_P (PX4's attitude P gain; the rate loop is much faster)
         rate = self.p.mc_roll_p
         self._att_alpha = 1.0 if rate <= 0 else -math.expm1(-dt_s * rate)
+        step = math.radians(self.p.mpc_yawrauto_max_deg_s) * dt_s   # yaw-rate limit per tick
+        self._yaw_step = (np.array(step), np.array(-step))
         delay_ticks = round(self.p.offboard_delay_s / dt_s)
         if delay_ticks and (self._tgt_hist is None or len(self._tgt_hist) != delay_ticks):
             self._tgt_hist = np.repeat(self.tgt_pos_ned_m[None], delay_ticks, axis=0)
@@ -193,7 +196,7 @@ class CascadedController:
         self._limit_and_integrate(accel_scale)
         self._attitude_lag()
         if self._yaw_busy:
-            self._turn(dt_s)
+            self._turn()
         return self.acc_ned_m_s2
 
     def _velocity_setpoint(self, pos_ned_m: np.ndarray) -> None:
@@ -275,26 +278,29 @@ class CascadedController:
         att += acc_h
         np.copyto(acc_h, att)
 
-    def _turn(self, dt_s: float) -> None:
+    def _turn(self) -> None:
         """Every heading one yaw-rate step toward its target, wrapped to [-pi, pi) (in place: the same
         arithmetic as ``clip`` and ``(x + pi) % 2pi - pi``, in fewer numpy calls)."""
         yaw, err = self.yaw_rad, self._yaw_err
         np.subtract(self.yaw_tgt_rad, yaw, out=err)
         _wrap(err)
-        step = math.radians(self.p.mpc_yawrauto_max_deg_s) * dt_s
-        np.maximum(err, -step, out=err)
+        step, neg_step = self._yaw_step
+        np.maximum(err, neg_step, out=err)
         np.minimum(err, step, out=err)
         yaw += err
         _wrap(yaw)
-        np.abs(err, out=err)
-        self._yaw_busy = bool((err >= step).any())
+        # busy while some heading is a whole step (or more) away: the largest |error| decides
+        self._yaw_busy = bool(np.maximum.reduce(np.abs(err, out=err)) >= step)
+
+
+_PI, _TWO_PI = np.array(math.pi), np.array(2 * math.pi)   # 0-d arrays: cheaper ufunc operands than floats
 
 
 def _wrap(angle_rad: np.ndarray) -> None:
     """Wrap angles to [-pi, pi), in place."""
-    angle_rad += math.pi
-    angle_rad %= 2 * math.pi
-    angle_rad -= math.pi
+    angle_rad += _PI
+    angle_rad %= _TWO_PI
+    angle_rad -= _PI
 
 
 def _saturate_h(x_n: np.ndarray, x_e: np.ndarray, vmax: np.ndarray, h: np.ndarray) -> None:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -127,12 +128,19 @@ class PlaneWorld:
         """Apply the commanded velocities and forces, then advance the space by ``dt_s``."""
         self._set()
         h = dt_s / substeps
-        self.space.step(h)
+        self._space_step(h)
         if substeps > 1:   # pymunk clears forces after every step: re-apply them
             self._force_arr[:self.n] = self._set_arr[:self.n, 2:4]
             for _ in range(substeps - 1):
                 self._set_force()
-                self.space.step(h)
+                self._space_step(h)
+
+    def _space_step(self, h: float) -> None:
+        """The first step through ``Space.step`` (it checks the bodies added), the others straight into
+        chipmunk: bodies and shapes are only added in the constructor, and the contact callbacks
+        never add or remove anything, so ``Space.step``'s bookkeeping has nothing left to do."""
+        self.space.step(h)
+        self._space_step = partial(pb.lib.cpSpaceStep, self.space._space)
 
     # ---- contacts ------------------------------------------------------------------------------
     def _pre_drones(self, arb: pymunk.Arbiter, _space: pymunk.Space, _data: Any) -> None:

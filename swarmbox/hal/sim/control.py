@@ -82,6 +82,7 @@ class CascadedController:
         self._att_acc = np.zeros((2, n))   # horizontal acceleration the attitude has reached so far
         self._att_alpha = 1.0
         self._vsp, self._tmp, self._h, self._lim_h, self._lim_up = z3(), z3(), *(np.zeros(n) for _ in "abc")
+        self._limits_key: bytes | None = None   # accel_scale the limits were computed for
         self._dt_s = -1.0
         self._offboard = np.zeros(n, dtype=bool)   # columns whose position target comes over the link
         self._tgt_hist: np.ndarray | None = None   # ring of past targets (offboard_delay_s > 0 only)
@@ -137,6 +138,7 @@ class CascadedController:
         tilt_only = offboard and not self.p.acc_hor_max_offboard
         self._offboard[i] = offboard
         self._ah_max[i] = self.p.acc_tilt_limit_m_s2 if tilt_only else self.p.acc_hor_limit_m_s2
+        self._limits_key = None
 
     def set_takeoff_ramp(self, i: int, up_m_s: float) -> None:
         """Limit drone ``i``'s climb rate to ``up_m_s`` (the takeoff ramp); ``inf`` lifts the limit."""
@@ -248,10 +250,13 @@ class CascadedController:
         """
         vsp, tmp, acc, h = self._vsp, self._tmp, self.acc_ned_m_s2, self._h
         an, ae, ad = self._acc_rows
-        np.multiply(accel_scale, self._ah_max, out=self._lim_h)
-        np.maximum(self._lim_h, self._tiny, out=self._lim_h)
+        scale_key = accel_scale.tobytes()   # the limits change only with the motor health (or the mode)
+        if scale_key != self._limits_key:
+            np.multiply(accel_scale, self._ah_max, out=self._lim_h)
+            np.maximum(self._lim_h, self._tiny, out=self._lim_h)
+            np.multiply(accel_scale, self._neg_up_max, out=self._lim_up)
+            self._limits_key = scale_key
         _saturate_h(an, ae, self._lim_h, h)
-        np.multiply(accel_scale, self._neg_up_max, out=self._lim_up)
         np.maximum(ad, self._lim_up, out=ad)
         np.minimum(ad, self._ramp_down_limit() if self.ramping else self.amax_d_m_s2, out=ad)
         np.equal(tmp[2], ad, out=h)

@@ -32,7 +32,7 @@ def _ints(series: pd.Series, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``series[rows]`` as int64 (0 where unknown) and the mask of known values."""
     values = series.to_numpy()[rows]
     if values.dtype.kind in "iub":
-        return values.astype(np.int64), np.ones(len(values), dtype=bool)
+        return values.astype(np.int64, copy=False), np.ones(len(values), dtype=bool)
     values = values.astype(np.float64)
     known = ~np.isnan(values)
     return np.where(known, values, 0).astype(np.int64), known
@@ -60,7 +60,14 @@ def pair_keys(pairs: list[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray]:
         a_all, b_all = (np.unique(np.concatenate(side)) for side in zip(*used, strict=True))
         pairs = [(np.searchsorted(a_all, a), np.searchsorted(b_all, b)) for a, b in pairs]
         a_lo, b_lo, span = 0, 0, len(b_all)
-    return [(a - a_lo) * span + (b - b_lo) for a, b in pairs]
+    keys = []
+    for a, b in pairs:   # in place: these arrays can span every message
+        key = a - a_lo
+        key *= span
+        key += b
+        key -= b_lo
+        keys.append(key)
+    return keys
 
 
 def _runs(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -88,24 +95,43 @@ def _codes(series: pd.Series) -> tuple[np.ndarray, pa.Array]:
     return cat.cat.codes.to_numpy(), words
 
 
+def _code(words: pa.Array, word: str) -> int:
+    """Code of ``word`` among ``words`` (-2, matching no code, when absent)."""
+    found = words.index(word).as_py()
+    return found if found >= 0 else -2
+
+
 def _text(codes: np.ndarray, words: pa.Array) -> pd.api.extensions.ExtensionArray:
     """Pandas text (``str``) of ``words[codes]``, NaN where a code is -1."""
     return pd.array(words.take(pa.array(codes, mask=codes < 0)), dtype="str")
 
 
+def _known(mask: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``arrays`` where ``mask`` holds: the arrays themselves, not copies, when it always does."""
+    return arrays if mask.all() else tuple(a[mask] for a in arrays)
+
+
+def _spread(mask: np.ndarray, values: np.ndarray, missing: float) -> np.ndarray:
+    """``values`` placed where ``mask`` holds, ``missing`` elsewhere."""
+    if mask.all():
+        return values
+    out = np.full(len(mask), missing, dtype=values.dtype)
+    out[mask] = values
+    return out
+
+
 def _link_max_latency_s(src: np.ndarray, dst: np.ndarray, known: np.ndarray, lat: np.ndarray) -> np.ndarray:
     """Per row: the largest latency seen on its link (src, dst), in s; 0 for a link with none."""
-    out = np.zeros(len(lat))
-    if known.any():
-        (links,) = pair_keys([(src[known], dst[known])])
-        link, distinct = pd.factorize(links)   # few links: a small hash table, no sort
-        mine = lat[known]
-        best = np.full(len(distinct), -np.inf)
-        seen = ~np.isnan(mine)
-        np.maximum.at(best, link[seen], mine[seen])
-        per_row = best[link]
-        out[known] = np.where(per_row == -np.inf, 0.0, per_row)
-    return out / 1e3
+    if not known.any():
+        return np.zeros(len(lat))
+    (links,) = pair_keys([_known(known, src, dst)])
+    link, distinct = pd.factorize(links)   # few links: a small hash table, no sort
+    (mine,) = _known(known, lat)
+    best = np.full(len(distinct), -np.inf)
+    seen = ~np.isnan(mine)
+    np.maximum.at(best, *_known(seen, link, mine))
+    per_row = best[link]
+    return _spread(known, np.where(per_row == -np.inf, 0.0, per_row), 0.0) / 1e3
 
 
 def _first_arrivals(messages: pd.DataFrame, recv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -114,46 +140,51 @@ def _first_arrivals(messages: pd.DataFrame, recv: np.ndarray) -> tuple[np.ndarra
     node, n_known = _ints(messages["node"], recv)
     t = messages[T].to_numpy(dtype=np.float64)[recv]
     keep = m_known & n_known & ~np.isnan(t)     # a receive with no time says nothing
-    return msg_id[keep], node[keep], t[keep]
+    return _known(keep, msg_id, node, t)
 
 
 def message_flow(messages: pd.DataFrame, tick_s: float = 0.0) -> pd.DataFrame:
     """One row per (message, destination); see :func:`swarmbox.analysis.network.message_flow`."""
-    kind = messages["kind"]
-    send = np.flatnonzero((kind == "send").to_numpy(dtype=bool))
-    drop = np.flatnonzero((kind == "drop").to_numpy(dtype=bool))
+    kind_codes, kind_words = _codes(messages["kind"])
+    send, drop, recv = (np.flatnonzero(kind_codes == _code(kind_words, k)) for k in ("send", "drop", "recv"))
     msg_id, m_known = _ints(messages["msg_id"], send)
     dst, d_known = _ints(messages["dst"], send)
     keyed = m_known & d_known
-    r_msg, r_node, r_t = _first_arrivals(messages, np.flatnonzero((kind == "recv").to_numpy(dtype=bool)))
+    r_msg, r_node, r_t = _first_arrivals(messages, recv)
     x_msg, x_known = _ints(messages["msg_id"], drop)
     x_dst, xd_known = _ints(messages["dst"], drop)
     x_keyed = x_known & xd_known
-    drop = drop[x_keyed]
-    keys, r_keys, x_keys = pair_keys([(msg_id[keyed], dst[keyed]), (r_msg, r_node),
-                                      (x_msg[x_keyed], x_dst[x_keyed])])
+    drop, x_msg, x_dst = _known(x_keyed, drop, x_msg, x_dst)
+    keys, r_keys, x_keys = pair_keys([_known(keyed, msg_id, dst), (r_msg, r_node), (x_msg, x_dst)])
 
     # matched in log order, where the send keys are almost sorted too (a cache-friendly search)
     r_order, r_distinct, r_starts = _runs(r_keys)
     first_t = np.minimum.reduceat(r_t[r_order], r_starts) if len(r_keys) else r_t
-    t_recv = np.full(len(send), np.nan)
-    t_recv[keyed] = _match(r_distinct, first_t, keys, np.nan)
+    t_recv = _spread(keyed, _match(r_distinct, first_t, keys, np.nan), np.nan)
     reason_codes, reason_words = _codes(messages["reason"])
     reason = np.full(len(send), -1, dtype=np.int64)
     if len(drop):   # the first logged drop reason, in log order (the sort is stable)
         x_order, x_distinct, x_starts = _runs(x_keys)
         first = reason_codes[drop[x_order[x_starts]]].astype(np.int64)
-        reason[keyed] = _match(x_distinct, first, keys, -1)
+        reason = _spread(keyed, _match(x_distinct, first, keys, -1), -1)
 
     t_send = messages[T].to_numpy(dtype=np.float64)[send]
     order = np.lexsort((_as_column(dst, d_known), _as_column(msg_id, m_known), t_send))   # NaN last
-    send, msg_id, m_known, dst, d_known, t_send, t_recv, reason = (
-        a[order] for a in (send, msg_id, m_known, dst, d_known, t_send, t_recv, reason))
+    # one at a time: each array in log order is freed before the next sorted one is made
+    send = send[order]
+    msg_id = msg_id[order]
+    m_known = m_known[order]
+    dst = dst[order]
+    d_known = d_known[order]
+    t_send = t_send[order]
+    t_recv = t_recv[order]
+    reason = reason[order]
+    del order
     src, s_known = _ints(messages["src"], send)
     lat = (t_recv - t_send) * 1e3
     delivered = ~np.isnan(t_recv)
     nodes = messages["node"].to_numpy()
-    logged = np.unique(nodes[nodes != NET]).astype(np.int64)
+    logged = np.sort(pd.unique(nodes[nodes != NET])).astype(np.int64)
     t_end = float(messages[T].max()) if len(messages) else np.nan
     margin = tick_s if np.isfinite(tick_s) else 0.0
     limit = t_end - _link_max_latency_s(src, dst, s_known & d_known, lat) - margin
@@ -161,10 +192,12 @@ def message_flow(messages: pd.DataFrame, tick_s: float = 0.0) -> pd.DataFrame:
         late = t_send > limit
     in_flight = ~delivered & (reason < 0) & late
     counted = np.isin(dst, logged) & d_known & ~in_flight
-    type_codes, type_words = _codes(messages["type"])
+    columns = {"msg_id": _as_column(msg_id, m_known)}
+    if "type" in messages:   # a table loaded without it (no scalar reads it) gives a flow without it
+        type_codes, type_words = _codes(messages["type"])
+        columns["type"] = _text(type_codes[send], type_words)
     return pd.DataFrame({
-        "msg_id": _as_column(msg_id, m_known), "type": _text(type_codes[send], type_words),
-        "src": _as_column(src, s_known), "dst": _as_column(dst, d_known),
+        **columns, "src": _as_column(src, s_known), "dst": _as_column(dst, d_known),
         "nbytes": messages["nbytes"].to_numpy()[send].astype(np.float64), "t_send": t_send, "t_recv": t_recv,
         "drop_reason": _text(reason, reason_words), LAT: lat, "delivered": delivered, "counted": counted,
         "lost": counted & ~delivered,

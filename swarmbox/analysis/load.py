@@ -28,7 +28,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import yaml
 
-from swarmbox.record.broadcast import expand_broadcasts
+from swarmbox.record.broadcast import BROADCAST, expand_broadcasts
 from swarmbox.record.schema import READABLE_VERSIONS, SCHEMA_VERSION, TABLES
 
 GROUND = -1
@@ -51,11 +51,14 @@ _ARROW = {"float64": pa.float64(), "int64": pa.int64(), "int32": pa.int32(), "in
           "int8": pa.int8(), "bool": pa.bool_(), "string": pa.string()}
 _DTYPES = {t: {c.name: c.dtype for c in cols} for t, cols in TABLES.items()}
 _READERS = 4
+#: Above this many bytes read, the loader hands Arrow's freed read buffers back to the system.
+_RELEASE_BYTES = 64 * 2**20
 #: Text columns read as pandas categoricals: few distinct values in the largest table.
 CATEGORICAL: dict[str, tuple[str, ...]] = {"messages": ("kind", "type", "reason")}
 #: Of those, the ones read straight as Parquet's dictionaries: no string is made per row, and the
-#: broadcast expansion copies indices. ``reason`` is parsed by that expansion, so it is read as text.
-_READ_AS_DICTIONARY: dict[str, tuple[str, ...]] = {"messages": ("kind", "type")}
+#: broadcast expansion copies indices. ``reason`` is parsed by that expansion: a file with broadcast rows
+#: has it decoded to text first (:func:`_expanded`).
+_READ_AS_DICTIONARY: dict[str, tuple[str, ...]] = {"messages": ("kind", "type", "reason")}
 _DRONE = re.compile(r"drone_(\d+)")
 
 
@@ -155,7 +158,8 @@ def read_arrow(path: Path, table: str, node: int, problems: list[str],
     as_dictionary = _READ_AS_DICTIONARY.get(table, ())
     try:
         pf = pq.ParquetFile(path, read_dictionary=as_dictionary)
-        present = set(pf.schema_arrow.names)
+        schema = pf.schema_arrow
+        present = set(schema.names)
         wanted = [c for c in TABLES[table] if columns is None or c.name in columns]
         names = [c.name for c in wanted if c.name in present]
         if table == "messages":   # broadcast rows expand to one per destination (see below)
@@ -166,12 +170,12 @@ def read_arrow(path: Path, table: str, node: int, problems: list[str],
     except Exception as exc:  # noqa: BLE001 - pyarrow raises many types for a corrupt file
         problems.append(f"{where}: unreadable ({type(exc).__name__}: {exc})")
         return None
-    meta = pf.schema_arrow.metadata or {}
+    meta = schema.metadata or {}
     version = meta.get(b"swarmbox.schema", SCHEMA_VERSION.encode()).decode()
     if version not in READABLE_VERSIONS:
         problems.append(f"{where}: schema version {version}, analyzer reads {', '.join(READABLE_VERSIONS)}")
     if table == "messages":   # version 2's one row per broadcast, as version 1's one per destination
-        data = expand_broadcasts(data)
+        data = _expanded(data)
     arrays, fields = [], []
     for col in wanted:
         typ = _ARROW[col.dtype]
@@ -189,6 +193,17 @@ def read_arrow(path: Path, table: str, node: int, problems: list[str],
     arrays.append(pa.array(np.full(len(data), node, dtype=np.int16)))
     fields.append(pa.field("node", pa.int16()))
     return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
+
+
+def _expanded(data: pa.Table) -> pa.Table:
+    """:func:`expand_broadcasts` of a messages table, its ``reason`` as text where a broadcast lists
+    destinations in it."""
+    names = data.column_names
+    if "reason" in names and "dst" in names and pa.types.is_dictionary(data.column("reason").type) \
+            and pc.any(pc.equal(data.column("dst"), BROADCAST)).as_py():
+        i = names.index("reason")
+        data = data.set_column(i, names[i], data.column(i).cast(pa.string()))
+    return expand_broadcasts(data)
 
 
 def _to_frame(table: str, parts: list[pa.Table]) -> pd.DataFrame:
@@ -210,30 +225,36 @@ def _to_frame(table: str, parts: list[pa.Table]) -> pd.DataFrame:
     # self_destruct frees each Arrow column once converted: peak memory ~1x the frame, not 2x
     frame = data.to_pandas(self_destruct=True, split_blocks=True)
     del data
-    for name in frame.columns:
-        if name != "node":
-            frame[name] = _conform(frame[name], _DTYPES[table][name])
+    for name, dtype in frame.dtypes.items():
+        target = _PANDAS_DTYPE[_DTYPES[table][name]] if name != "node" else None
+        if target is None or (target != "str" and dtype == np.dtype(target)):
+            continue   # numbers arrive as the schema's type unless they hold nulls: nothing to do
+        column = frame[name]
+        conformed = _conform(column, target)
+        if conformed is not column:   # setting back a column that needed nothing would copy it
+            frame[name] = conformed
     return frame
 
 
 def _first_seen(series: pd.Series) -> pd.Series:
     """A categorical with its categories in order of first appearance, the unused ones dropped."""
     codes = series.cat.codes.to_numpy()
+    if len(codes) and codes[0] == 0 and codes.min() == 0:   # no NaN (-1): maybe in order already
+        top = np.maximum.accumulate(codes)   # a new code first appears where this running max steps up
+        if top[-1] == len(series.cat.categories) - 1 and (np.diff(top) <= 1).all():
+            return series   # steps of one up to the last category: in order, every one used
     seen = pd.unique(codes)
-    if len(seen) == len(series.cat.categories) and (seen == np.arange(len(seen))).all():
-        return series
     remap = np.zeros(len(series.cat.categories), dtype=codes.dtype)
     remap[seen] = np.arange(len(seen))
     return pd.Series(pd.Categorical.from_codes(remap[codes], series.cat.categories[seen]),
                      index=series.index, name=series.name)
 
 
-def _conform(series: pd.Series, dtype: str) -> pd.Series:
-    target = _PANDAS_DTYPE[dtype]
+def _conform(series: pd.Series, target: str) -> pd.Series:
+    """``series`` as the pandas dtype ``target``: text without nulls, integers as floats when some are
+    missing."""
     if isinstance(series.dtype, pd.CategoricalDtype):
         return _first_seen(series)   # text as a dictionary, nulls already filled with ""
-    if target != "str" and series.dtype == np.dtype(target):
-        return series   # numbers arrive as the schema's type unless they hold nulls: nothing to do
     missing = series.isna()
     if target == "str":
         if series.dtype == "str" and not missing.any():
@@ -289,6 +310,7 @@ def load_run(run_dir: str | Path, columns: dict[str, tuple[str, ...]] | None = N
 
     with ThreadPoolExecutor(max_workers=_READERS) as pool:   # pyarrow reads without the GIL
         results = list(pool.map(read, range(len(jobs))))
+    read_bytes = sum(data.nbytes for data in results if data is not None)
     for (nid, ndir, table), data, note in zip(jobs, results, notes, strict=True):
         problems.extend(note)
         if data is not None:
@@ -310,8 +332,10 @@ def load_run(run_dir: str | Path, columns: dict[str, tuple[str, ...]] | None = N
         from swarmbox.analysis.ulog import add_estimator_events  # PX4 runs: EKF2's markers as events
         tables["events"] = add_estimator_events(run_dir, tables["events"], tables.get("state"))
     # Arrow's allocator keeps the freed Parquet read buffers for reuse: ~0.7 GB of a 1,000-drone run
-    # that the pandas-side analysis would never get back. Return them to the system.
-    pa.default_memory_pool().release_unused()
+    # that the pandas-side analysis would never get back. Return them to the system; a small run's few
+    # MB stay for the next one (giving them back costs a sweep's worker a page fault per 4 KB re-read).
+    if read_bytes > _RELEASE_BYTES:
+        pa.default_memory_pool().release_unused()
     return RunData(run_dir, manifest, config, tables, sorted(dirs), problems, incomplete)
 
 

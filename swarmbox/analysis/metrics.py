@@ -72,6 +72,7 @@ def within(frame: pd.DataFrame, window: ExecWindow) -> pd.DataFrame:
 
 _TRUE = ["true_n", "true_e", "true_d"]
 _EST = ["pos_n", "pos_e", "pos_d"]
+_VEL = ["vel_n", "vel_e", "vel_d"]
 
 
 def _time_order(t: np.ndarray) -> np.ndarray:
@@ -136,7 +137,8 @@ def drone_workload(state: pd.DataFrame, events: pd.DataFrame, drones: list[int],
     t = state[T].to_numpy(dtype="float64")
     inside = (t >= window.start) & (t <= window.end)
     t = t[inside]
-    true, est = (state[cols].to_numpy(dtype="float64")[inside] for cols in (_TRUE, _EST))
+    true, est = (np.column_stack([state[c].to_numpy(dtype="float64")[inside] for c in cols])
+                 for cols in (_TRUE, _EST))
     progress = _progress_events(events)
     p_t, p_name = progress[T].to_numpy(dtype="float64"), progress["name"].to_numpy()
     rows = []
@@ -176,23 +178,58 @@ def workload_summary(per_drone: pd.DataFrame, window: ExecWindow) -> dict[str, f
 
 def discrepancy(state: pd.DataFrame) -> pd.DataFrame:
     """GNSS - estimate per state sample: columns node, tick, t_u, disc_n_m, disc_e_m, disc_d_m, disc_h_m."""
-    out = state[["node", "tick", T]].copy()
+    out = {c: state[c].to_numpy() for c in ("node", "tick", T)}
     for axis in "ned":
-        out[f"disc_{axis}_m"] = state[f"gnss_{axis}"] - state[f"pos_{axis}"]
+        out[f"disc_{axis}_m"] = state[f"gnss_{axis}"].to_numpy() - state[f"pos_{axis}"].to_numpy()
     out["disc_h_m"] = np.hypot(out["disc_n_m"], out["disc_e_m"])
+    return pd.DataFrame(out, index=state.index)
+
+
+def _drone_slots(node: np.ndarray, drones: list[int]) -> np.ndarray:
+    """Each row's position in ``drones`` (the last one for a repeated id), -1 for any other node."""
+    ids = np.asarray(drones, dtype=np.int64)
+    if not len(ids):
+        return np.full(len(node), -1)
+    order = np.argsort(ids, kind="stable")
+    pos = np.searchsorted(ids[order], node, side="right") - 1
+    hit = (pos >= 0) & (ids[order][np.maximum(pos, 0)] == node)
+    return np.where(hit, order[np.maximum(pos, 0)], -1)
+
+
+def _by_tick(state: pd.DataFrame, cols: list[str], drones: list[int],
+             ticks: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Array (ticks, drones, len(cols)) with NaN where a drone has no sample at a tick; ``ticks``:
+    the sorted ticks to lay out (default: those of ``state``)."""
+    if ticks is None:
+        ticks = np.sort(state["tick"].unique())
+    return ticks, _lay_out(state, [cols], drones, ticks)[0]
+
+
+def _lay_out(state: pd.DataFrame, groups: list[list[str]], drones: list[int],
+             ticks: np.ndarray) -> list[np.ndarray]:
+    """:func:`_by_tick` of each group of columns, the rows placed once for all of them."""
+    d_idx = _drone_slots(state["node"].to_numpy(), drones)
+    keep = d_idx >= 0
+    rows = slice(None) if keep.all() else keep
+    cell = np.searchsorted(ticks, state["tick"].to_numpy()[rows])
+    cell *= len(drones)
+    cell += d_idx[rows]   # (tick, drone) as one index into the rows of a (ticks x drones, cols) view
+    out = []
+    for cols in groups:
+        grid = np.full((len(ticks), len(drones), len(cols)), np.nan)
+        values = np.column_stack([state[c].to_numpy(dtype="float64")[rows] for c in cols])
+        grid.reshape(-1, len(cols))[cell] = values
+        out.append(grid)
     return out
 
 
-def _by_tick(state: pd.DataFrame, cols: list[str], drones: list[int]) -> tuple[np.ndarray, np.ndarray]:
-    """Array (ticks, drones, len(cols)) with NaN where a drone has no sample at a tick."""
-    ticks = np.sort(state["tick"].unique())
-    out = np.full((len(ticks), len(drones), len(cols)), np.nan)
-    t_idx = np.searchsorted(ticks, state["tick"].to_numpy())
-    d_map = {d: i for i, d in enumerate(drones)}
-    d_idx = state["node"].map(d_map).to_numpy()
-    keep = ~pd.isna(d_idx)
-    out[t_idx[keep], d_idx[keep].astype(int)] = state.loc[keep, cols].to_numpy(dtype="float64")
-    return ticks, out
+def _last_samples(state: pd.DataFrame) -> pd.DataFrame:
+    """``state.drop_duplicates(["node", "tick"], keep="last")``; the frame itself, not a copy, when its
+    rows are strictly ordered by (node, tick), as the loader gives them: then none repeats."""
+    node, tick = state["node"].to_numpy(), state["tick"].to_numpy()
+    with np.errstate(invalid="ignore"):
+        ordered = (node[1:] > node[:-1]) | ((node[1:] == node[:-1]) & (tick[1:] > tick[:-1]))
+    return state if ordered.all() else state.drop_duplicates(["node", "tick"], keep="last")
 
 
 def nearest_gap(pos: np.ndarray) -> float:
@@ -208,17 +245,21 @@ def nearest_gap(pos: np.ndarray) -> float:
     return float(dist[:, 1].min())
 
 
+def _position_columns(state: pd.DataFrame) -> list[str]:
+    """The truth when every drone has it, else the estimate."""
+    truth = len(state) and all(np.isfinite(state[c].to_numpy(dtype="float64")).all() for c in _TRUE)
+    return _TRUE if truth else _EST
+
+
 def separation_by_tick(state: pd.DataFrame, drones: list[int]) -> pd.Series:
     """Smallest pairwise 3-D distance between drones at every tick (NaN with fewer than 2 drones)."""
-    state = state.drop_duplicates(["node", "tick"], keep="last")
-    truth = state[["true_n", "true_e", "true_d"]].to_numpy(dtype="float64")
-    has_truth = len(truth) and np.isfinite(truth).all()
-    cols = ["true_n", "true_e", "true_d"] if has_truth else ["pos_n", "pos_e", "pos_d"]
+    state = _last_samples(state)
+    cols = _position_columns(state)
     ticks = np.sort(state["tick"].unique())
     if len(drones) < 2 or len(ticks) == 0:
         return pd.Series(np.nan, index=ticks, dtype="float64")
-    if len(drones) <= SMALL_SWARM:
-        return pd.Series(_dense_gaps(state, cols, drones, ticks), index=ticks, dtype="float64")
+    if len(drones) <= SMALL_SWARM:   # a tick where no drone of ``drones`` logged: NaN
+        return pd.Series(_dense_gaps(_by_tick(state, cols, drones, ticks)[1]), index=ticks, dtype="float64")
     state = state[state["node"].isin(drones)].sort_values("tick", kind="stable")
     pos = state[cols].to_numpy(dtype="float64")
     bounds = np.searchsorted(state["tick"].to_numpy(), ticks, side="left").tolist() + [len(state)]
@@ -226,19 +267,14 @@ def separation_by_tick(state: pd.DataFrame, drones: list[int]) -> pd.Series:
     return pd.Series(best, index=ticks, dtype="float64")
 
 
-def _dense_gaps(state: pd.DataFrame, cols: list[str], drones: list[int], ticks: np.ndarray) -> np.ndarray:
-    """Per tick, the smallest distance over every pair, for a small swarm: all pairs of a block of
-    ticks in one array operation (a k-d tree per tick costs far more than N^2 distances at N <= 16)."""
-    _, pos = _by_tick(state[state["node"].isin(drones)], cols, drones)
-    if len(pos) != len(ticks):   # ticks where no drone of ``drones`` logged: place the others
-        full = np.full((len(ticks), len(drones), len(cols)), np.nan)
-        have = np.searchsorted(ticks, np.sort(state.loc[state["node"].isin(drones), "tick"].unique()))
-        full[have] = pos
-        pos = full
-    i, j = np.triu_indices(len(drones), k=1)
-    out = np.empty(len(ticks))
-    step = max(1, 4_000_000 // max(len(i), 1))   # bound the block to ~100 MB
-    for lo in range(0, len(ticks), step):
+def _dense_gaps(pos: np.ndarray) -> np.ndarray:
+    """Per tick of ``pos`` (ticks, drones, 3), the smallest distance over every pair, for a small swarm:
+    all pairs of a block of ticks in one array operation (a k-d tree per tick costs far more than N^2
+    distances at N <= 16)."""
+    i, j = np.triu_indices(pos.shape[1], k=1)
+    out = np.empty(len(pos))
+    step = max(1, 2**16 // max(len(i), 1))   # blocks of ~1.5 MB temporaries: they stay in the cache
+    for lo in range(0, len(pos), step):
         block = pos[lo:lo + step]
         d = np.sqrt(((block[:, i] - block[:, j]) ** 2).sum(axis=2))
         with np.errstate(all="ignore"), warnings.catch_warnings():
@@ -249,21 +285,30 @@ def _dense_gaps(state: pd.DataFrame, cols: list[str], drones: list[int], ticks: 
 
 def order_by_tick(state: pd.DataFrame, drones: list[int]) -> pd.Series:
     """Velocity alignment |sum v| / sum |v| at every tick (NaN when every drone is at rest)."""
-    state = state.drop_duplicates(["node", "tick"], keep="last")
-    ticks, vel = _by_tick(state, ["vel_n", "vel_e", "vel_d"], drones)
+    ticks, vel = _by_tick(_last_samples(state), _VEL, drones)
+    return pd.Series(_alignment(vel), index=ticks, dtype="float64")
+
+
+def _alignment(vel: np.ndarray) -> np.ndarray:
+    """|sum v| / sum |v| per tick of ``vel`` (ticks, drones, 3)."""
     vel = np.nan_to_num(vel)
     total = np.linalg.norm(vel.sum(axis=1), axis=1)
     norms = np.linalg.norm(vel, axis=2).sum(axis=1)
     with np.errstate(all="ignore"):
-        order = np.where(norms > 1e-9, total / norms, np.nan)
-    return pd.Series(order, index=ticks, dtype="float64")
+        return np.where(norms > 1e-9, total / norms, np.nan)
 
 
 def swarm_timeline(state: pd.DataFrame, drones: list[int]) -> pd.DataFrame:
     """Per tick: unified time (earliest drone sample), minimum separation and order."""
     times = state.groupby("tick")[T].min()
-    sep = separation_by_tick(state, drones)
-    order = order_by_tick(state, drones)
+    if 2 <= len(drones) <= SMALL_SWARM:   # the rows placed by tick once, for positions and velocities
+        state = _last_samples(state)
+        ticks = np.sort(state["tick"].unique())
+        pos, vel = _lay_out(state, [_position_columns(state), _VEL], drones, ticks)
+        sep = pd.Series(_dense_gaps(pos), index=ticks, dtype="float64")
+        order = pd.Series(_alignment(vel), index=ticks, dtype="float64")
+    else:
+        sep, order = separation_by_tick(state, drones), order_by_tick(state, drones)
     return pd.DataFrame({"tick": times.index, T: times.to_numpy(),
                          "separation_m": sep.reindex(times.index).to_numpy(),
                          "order": order.reindex(times.index).to_numpy()})

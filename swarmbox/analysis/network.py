@@ -36,8 +36,9 @@ def message_flow(messages: pd.DataFrame, tick_s: float = 0.0) -> pd.DataFrame:
 
     ``tick_s``: a message is handled at the first tick after its arrival, so one more tick of
     margin is given to messages at the end of the run. Columns: msg_id, type, src, dst, nbytes,
-    t_send, t_recv, drop_reason, latency_ms, delivered, counted, lost; sorted by (t_send, msg_id,
-    dst). Matched by sorted keys (:mod:`swarmbox.analysis.flow`): no join of the whole table.
+    t_send, t_recv, drop_reason, latency_ms, delivered, counted, lost (type only when ``messages`` has
+    it); sorted by (t_send, msg_id, dst). Matched by sorted keys (:mod:`swarmbox.analysis.flow`): no join
+    of the whole table.
     """
     return flow.message_flow(messages, tick_s)
 
@@ -102,8 +103,9 @@ def touching(flow: pd.DataFrame, columns: list[str] | None = None) -> pd.DataFra
 
 def _traffic(flow: pd.DataFrame, agents: pd.Index, span_s: float) -> pd.DataFrame:
     """Bytes per second each of ``agents`` sent (tx) and received (rx, delivered messages only)."""
-    tx = flow.groupby("src")["nbytes"].sum().reindex(agents).fillna(0.0)
-    rx = flow[flow["delivered"]].groupby("dst")["nbytes"].sum().reindex(agents).fillna(0.0)
+    tx = flow["nbytes"].groupby(flow["src"]).sum().reindex(agents).fillna(0.0)
+    got = flow["delivered"].to_numpy(dtype=bool)   # only the two columns read, not a copy of the flow
+    rx = flow["nbytes"][got].groupby(flow["dst"][got]).sum().reindex(agents).fillna(0.0)
     return pd.DataFrame({"tx_bytes_per_s": tx / span_s if span_s > 0 else np.nan,
                          "rx_bytes_per_s": rx / span_s if span_s > 0 else np.nan}, index=agents)
 
@@ -119,8 +121,8 @@ def agent_stats(flow: pd.DataFrame, span_s: float) -> pd.DataFrame:
 def agent_traffic(flow: pd.DataFrame, span_s: float) -> pd.DataFrame:
     """The tx/rx columns of :func:`agent_stats` alone (``agent``, ``tx_bytes_per_s``, ``rx_bytes_per_s``),
     without the per-agent latency and loss: what a run's scalars read of the agents."""
-    ids = pd.Index(np.concatenate([flow["src"].to_numpy(), flow["dst"].to_numpy()]), name="agent")
-    return _traffic(flow, ids.unique().dropna().sort_values(), span_s).reset_index()
+    ids = np.concatenate([pd.unique(flow["src"].to_numpy()), pd.unique(flow["dst"].to_numpy())])
+    return _traffic(flow, pd.Index(np.sort(pd.unique(ids)), name="agent").dropna(), span_s).reset_index()
 
 
 def overall_stats(flow: pd.DataFrame) -> dict[str, float]:
@@ -128,8 +130,15 @@ def overall_stats(flow: pd.DataFrame) -> dict[str, float]:
     names = ["loss_ratio", "latency_ms_mean", "latency_ms_p50", "latency_ms_p95", "latency_ms_max"]
     if flow.empty:
         return dict.fromkeys(names, np.nan)
-    row = grouped_stats(flow.assign(_all=0), ["_all"], 0.0).iloc[0]
-    return {k: float(row[k]) for k in names}
+    sent, lost = int(flow["counted"].to_numpy().sum()), int(flow["lost"].to_numpy().sum())
+    lat = pd.Series(flow[_LAT].to_numpy()[flow["delivered"].to_numpy(dtype=bool)])
+    # one group, by pandas' kernels: the values of grouped_stats over every message, without its copies
+    grouped = lat.groupby(np.zeros(len(lat), dtype=np.int8))
+    p50, p95 = grouped.quantile([0.5, 0.95]).to_numpy().reshape(2, -1)
+    values = {"latency_ms_mean": grouped.mean().to_numpy(), "latency_ms_p50": p50, "latency_ms_p95": p95,
+              "latency_ms_max": grouped.max().to_numpy()}
+    return {"loss_ratio": lost / sent if sent > 0 else np.nan,
+            **{k: float(v[0]) if len(v) else np.nan for k, v in values.items()}}
 
 
 def algebraic_connectivity(nodes: list[int], edges: set[tuple[int, int]]) -> float:

@@ -21,6 +21,14 @@ ANALYZED_COLUMNS: dict[str, tuple[str, ...]] = {
     "setpoints": ("t_s",),
     "messages": ("t_s", "kind", "msg_id", "type", "src", "dst", "nbytes", "t_sent_s", "reason"),
 }
+#: What the scalars alone read (a sweep): of the state, time, tick and the positions and velocities (its
+#: stage, mode, flags, yaw and battery feed no scalar); of the messages, all but the type.
+SCALAR_COLUMNS: dict[str, tuple[str, ...]] = {
+    **ANALYZED_COLUMNS,
+    "state": ("t_s", "tick", *(f"{kind}_{axis}" for kind in ("pos", "vel", "gnss", "true")
+                               for axis in "ned")),
+    "messages": tuple(c for c in ANALYZED_COLUMNS["messages"] if c != "type"),
+}
 
 
 @dataclass(frozen=True)
@@ -36,8 +44,9 @@ class AnalysisOptions:
     fault_onset_u: float | None = None  # overrides the fault event (unified time, s)
     fault_target: int | None = None
     #: Compute only what the scalars need (a sweep reads nothing else): the links, the markers and,
-    #: when there is no fault onset, the timeline and the flags are left empty, and the agents (and
-    #: drones) get only their tx/rx rates, not their latency and loss. Same scalars.
+    #: when there is no fault onset, the timeline and the flags are left empty, the agents (and
+    #: drones) get only their tx/rx rates, not their latency and loss, and the messages no
+    #: ``t_sent_u``. Same scalars.
     scalars_only: bool = False
 
     def tests(self) -> dict[str, anomaly.OutlierTest]:
@@ -71,13 +80,19 @@ class RunAnalysis:
         return self.run.problems
 
 
+def _unified_times(run: RunData) -> list[np.ndarray]:
+    """The unified times of each table that has any."""
+    times = (f[T].to_numpy(dtype=np.float64) for f in run.tables.values())
+    return [t for t in times if len(t) and not np.isnan(t).all()]
+
+
 def _last_time(run: RunData) -> float:
-    ends = [float(f[T].max()) for f in run.tables.values() if len(f) and f[T].notna().any()]
+    ends = [float(np.nanmax(t)) for t in _unified_times(run)]
     return max(ends) if ends else np.nan
 
 
 def _first_time(run: RunData) -> float:
-    starts = [float(f[T].min()) for f in run.tables.values() if len(f) and f[T].notna().any()]
+    starts = [float(np.nanmin(t)) for t in _unified_times(run)]
     return min(starts) if starts else np.nan
 
 
@@ -103,7 +118,8 @@ def _drone_table(run: RunData, window: metrics.ExecWindow | None, span: metrics.
     table = pd.DataFrame({"drone": drones})
     if window is not None:
         table = metrics.drone_workload(run.tables["state"], run.tables["events"], drones, window)
-    d = metrics.within(disc, span).groupby("node")["disc_h_m"].agg(disc_h_m_mean="mean", disc_h_m_max="max")
+    inside = ((disc[T] >= span.start) & (disc[T] <= span.end)).to_numpy()   # metrics.within, one column
+    d = disc["disc_h_m"][inside].groupby(disc["node"][inside]).agg(disc_h_m_mean="mean", disc_h_m_max="max")
     table = table.merge(d, left_on="drone", right_index=True, how="left")
     net = agents.rename(columns={"agent": "drone"})
     return table.merge(net, on="drone", how="left")
@@ -132,7 +148,7 @@ def analyze_run(source: str | Path | RunData, opts: AnalysisOptions | None = Non
     """Analyze one run directory (or already loaded data, which gets unified in place)."""
     opts = opts or AnalysisOptions()
     run = source if isinstance(source, RunData) else load_run(source)
-    clocks = unify(run, opts.clock)
+    clocks = unify(run, opts.clock, sent_times=not opts.scalars_only)
     window = metrics.exec_window(run.tables["stages"], _last_time(run))
     if window is None:
         run.problems.append("the ground never entered EXECUTION: workload metrics are NaN")

@@ -40,7 +40,7 @@ from scipy import stats
 from swarmbox.analysis.catalog import MACHINE_METRICS, Direction, direction_of, unit_of
 from swarmbox.analysis.load import RunLoadError, find_runs, find_unfinished, load_run
 from swarmbox.analysis.parallel import map_runs
-from swarmbox.analysis.report import ANALYZED_COLUMNS, AnalysisOptions, analyze_run
+from swarmbox.analysis.report import SCALAR_COLUMNS, AnalysisOptions, analyze_run
 
 log = logging.getLogger(__name__)
 
@@ -77,12 +77,13 @@ class SweepResult:
 def _analyze_one(run_dir: Path, root: Path, opts: AnalysisOptions) -> dict:
     """One run's table row, problems, declared directions and choice names (runs in a worker).
 
-    Only the scalars are read, so the tables that feed none are not computed (``scalars_only``).
+    Only the scalars are read, so the columns that feed none are not loaded (``SCALAR_COLUMNS``) and the
+    tables that feed none are not computed (``scalars_only``).
     """
     rel = str(run_dir.relative_to(root)) if run_dir != root else "."
     out: dict = {"row": None, "problems": [], "directions": {}, "choices": []}
     try:
-        run = load_run(run_dir, ANALYZED_COLUMNS)
+        run = load_run(run_dir, SCALAR_COLUMNS)
     except RunLoadError as exc:
         out["problems"].append({"run": rel, "severity": "skipped", "problem": str(exc)})
         return out

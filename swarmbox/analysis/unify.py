@@ -53,19 +53,27 @@ class PairEstimate:
 
 def _int64(values: np.ndarray) -> np.ndarray:
     """As pandas casts: an unknown (NaN) id raises rather than becoming a number."""
+    if values.dtype.kind in "iu":
+        return values.astype(np.int64)
     return pd.Series(values, copy=False).astype("int64").to_numpy()
 
 
 def clock_samples(messages: pd.DataFrame) -> pd.DataFrame:
     """One row per received message: ``a`` sender, ``b`` receiver, ``t_a`` (sender clock), ``sample``."""
+    return pd.DataFrame(_sample_arrays(messages))
+
+
+def _sample_arrays(messages: pd.DataFrame) -> dict[str, np.ndarray]:
+    """The columns of :func:`clock_samples` as arrays (a frame would copy them into one block)."""
     node = messages["node"].to_numpy()
     t_b = messages["t_s"].to_numpy(dtype=np.float64)
     t_a = messages["t_sent_s"].to_numpy(dtype=np.float64)
     keep = (messages["kind"] == "recv").to_numpy(dtype=bool) & (node != NET)
     keep &= np.isfinite(t_b) & np.isfinite(t_a)
-    t_a, t_b = t_a[keep], t_b[keep]
-    return pd.DataFrame({"a": _int64(messages["src"].to_numpy()[keep]), "b": _int64(node[keep]),
-                         "t_a": t_a, "t_b": t_b, "sample": t_b - t_a})
+    rows = np.flatnonzero(keep)   # one mask, several columns: positions are cheaper to apply
+    t_a, t_b = t_a[rows], t_b[rows]
+    return {"a": _int64(messages["src"].to_numpy()[rows]), "b": _int64(node[rows]),
+            "t_a": t_a, "t_b": t_b, "sample": t_b - t_a}
 
 
 def window_minima(fwd: pd.DataFrame, bwd: pd.DataFrame, window_s: float) -> pd.DataFrame:
@@ -85,21 +93,32 @@ def window_minima(fwd: pd.DataFrame, bwd: pd.DataFrame, window_s: float) -> pd.D
     return out.reset_index(drop=True)
 
 
-def all_window_minima(samples: pd.DataFrame, window_s: float) -> dict[tuple[int, int], pd.DataFrame]:
+def all_window_minima(samples: pd.DataFrame | dict[str, np.ndarray],
+                      window_s: float) -> dict[tuple[int, int], pd.DataFrame]:
     """:func:`window_minima` of every node pair (a < b) heard at least one way, in one grouping.
 
     One sort of all samples by (pair, window) instead of one pass per pair: the cost is linear in the
     messages (n log n), whatever the number of nodes; the windows of a pair are in time order.
     """
-    samples = samples[samples["a"] != samples["b"]]
-    a, b = samples["a"].to_numpy(), samples["b"].to_numpy()
+    return {pair: pd.DataFrame(columns) for pair, columns in _window_arrays(samples, window_s).items()}
+
+
+def _window_arrays(samples: pd.DataFrame | dict[str, np.ndarray],
+                   window_s: float) -> dict[tuple[int, int], dict[str, np.ndarray]]:
+    """The columns of :func:`all_window_minima`'s frames, as arrays."""
+    a, b, t_a, t_b, sample = (np.asarray(samples[c]) for c in ("a", "b", "t_a", "t_b", "sample"))
+    other = a != b
+    if not other.all():   # a node's messages to itself say nothing about clocks
+        a, b, t_a, t_b, sample = a[other], b[other], t_a[other], t_b[other], sample[other]
     fwd = a < b
-    lo, hi = np.where(fwd, a, b), np.where(fwd, b, a)
-    t = np.where(fwd, samples["t_a"], samples["t_b"])   # both directions on the clock of ``lo``
-    sample = samples["sample"].to_numpy()
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    t = np.where(fwd, t_a, t_b)   # both directions on the clock of ``lo``
     w = np.floor(t / window_s)
     order = np.lexsort((w, hi, lo))
-    lo, hi, w, t = lo[order], hi[order], w[order], t[order]
+    lo = lo[order]   # one at a time: each unsorted array is freed before the next sorted one is made
+    hi = hi[order]
+    w = w[order]
+    t = t[order]
     pair = np.concatenate([[True], (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])])
     starts = np.flatnonzero(pair | np.concatenate([[True], w[1:] != w[:-1]]))
     if not len(starts):
@@ -110,13 +129,14 @@ def all_window_minima(samples: pd.DataFrame, window_s: float) -> dict[tuple[int,
              "t_lo": t_lo, "t_hi": t_hi, "t_mid": (t_lo + t_hi) / 2}
     first = np.flatnonzero(pair[starts])   # the first window of each pair
     bounds = [*first.tolist(), len(starts)]
-    return {(int(lo[starts[i]]), int(hi[starts[i]])): pd.DataFrame({k: v[i:j] for k, v in table.items()})
+    return {(int(lo[starts[i]]), int(hi[starts[i]])): {k: v[i:j] for k, v in table.items()}
             for i, j in zip(bounds[:-1], bounds[1:], strict=True)}
 
 
-def two_way_estimate(a: int, b: int, win: pd.DataFrame, opts: ClockOptions) -> PairEstimate | None:
+def two_way_estimate(a: int, b: int, win: pd.DataFrame | dict[str, np.ndarray],
+                     opts: ClockOptions) -> PairEstimate | None:
     """Relative clock of b with respect to a from the windows where both directions were heard."""
-    fwd, bwd, t_mid = (win[c].to_numpy(dtype=np.float64) for c in ("fwd", "bwd", "t_mid"))
+    fwd, bwd, t_mid = (np.asarray(win[c], dtype=np.float64) for c in ("fwd", "bwd", "t_mid"))
     both = ~np.isnan(fwd) & ~np.isnan(bwd)
     n = int(both.sum())
     if not n:
@@ -131,21 +151,22 @@ def two_way_estimate(a: int, b: int, win: pd.DataFrame, opts: ClockOptions) -> P
     return PairEstimate(a, b, float(intercept), float(slope), delay, float(n), n, "two-way")
 
 
-def one_way_estimate(a: int, b: int, win: pd.DataFrame, opts: ClockOptions,
+def one_way_estimate(a: int, b: int, win: pd.DataFrame | dict[str, np.ndarray], opts: ClockOptions,
                      typical_delay_s: float) -> PairEstimate | None:
     """Relative clock from one direction only, assuming the typical delay of the two-way pairs."""
-    if win["fwd"].notna().any():
-        rel = float(win["fwd"].min()) - typical_delay_s
-    elif win["bwd"].notna().any():
-        rel = typical_delay_s - float(win["bwd"].min())
+    fwd, bwd = (np.asarray(win[c], dtype=np.float64) for c in ("fwd", "bwd"))
+    if not np.isnan(fwd).all():
+        rel = float(np.nanmin(fwd)) - typical_delay_s
+    elif not np.isnan(bwd).all():
+        rel = typical_delay_s - float(np.nanmin(bwd))
     else:
         return None
     return PairEstimate(a, b, rel, 0.0, typical_delay_s, opts.one_way_weight, 0, "one-way")
 
 
-def estimate_pairs(samples: pd.DataFrame, opts: ClockOptions) -> list[PairEstimate]:
+def estimate_pairs(samples: pd.DataFrame | dict[str, np.ndarray], opts: ClockOptions) -> list[PairEstimate]:
     """Two-way estimates for every pair heard both ways, then one-way ones for the rest."""
-    wins = all_window_minima(samples, opts.window_s)
+    wins = _window_arrays(samples, opts.window_s)
     two_way = [e for p, w in wins.items() if (e := two_way_estimate(*p, w, opts))]
     typical = float(np.median([e.delay_s for e in two_way])) if two_way else 0.0
     done = {(e.a, e.b) for e in two_way}
@@ -206,39 +227,61 @@ def estimate_clocks(messages: pd.DataFrame, nodes: list[int],
                     opts: ClockOptions | None = None) -> pd.DataFrame:
     """Estimated clock of every node: columns node, offset_s, drift_ppm, method, pairs."""
     opts = opts or ClockOptions()
-    return solve_clocks(estimate_pairs(clock_samples(messages), opts), nodes)
+    return solve_clocks(estimate_pairs(_sample_arrays(messages), opts), nodes)
 
 
 def to_unified(t_local: pd.Series, node: pd.Series, clocks: pd.DataFrame) -> pd.Series:
     """Map node-local times to ground time with each node's estimated offset and drift (a node with
     no estimate, or a NaN one, keeps 0)."""
     ids = clocks["node"].to_numpy(dtype=np.int64)
-    order = np.argsort(ids, kind="stable")
-    ids = ids[order]
-    nodes = node.astype("int64").to_numpy()
-    slot = np.searchsorted(ids, nodes)   # a few nodes: a short binary search
-    slot[(slot == len(ids)) | (np.append(ids, 0)[slot] != nodes)] = len(ids)   # unknown: the 0 appended
+    nodes = node.to_numpy()
+    if nodes.dtype.kind not in "iu":
+        nodes = node.astype("int64").to_numpy()   # as pandas casts: an unknown (NaN) node raises
+    first = np.unique(ids, return_index=True)[1]   # a node listed twice: its first estimate
 
-    def per_row(column: str) -> np.ndarray:
-        values = clocks[column].to_numpy(dtype=np.float64)[order]
-        return np.append(np.where(np.isnan(values), 0.0, values), 0.0)[slot]
+    def per_node(column: str) -> np.ndarray:
+        values = clocks[column].to_numpy(dtype=np.float64)[first]
+        return np.append(np.where(np.isnan(values), 0.0, values), 0.0)   # then 0 for an unknown node
 
-    drift = per_row("drift_ppm") * 1e-6
-    return pd.Series((t_local.to_numpy(dtype=np.float64) - per_row("offset_s")) / (1.0 + drift),
-                     index=t_local.index)
+    slot = _slots(ids[first], nodes)
+    out = per_node("offset_s")[slot]
+    np.subtract(t_local.to_numpy(dtype=np.float64), out, out=out)
+    scale = (per_node("drift_ppm") * 1e-6)[slot]
+    scale += 1.0
+    out /= scale   # (t - offset) / (1 + drift), in place: these arrays span every message
+    return pd.Series(out, index=t_local.index, copy=False)
 
 
-def unify(run: RunData, opts: ClockOptions | None = None) -> pd.DataFrame:
+def _slots(ids: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+    """Position of each of ``nodes`` in the sorted distinct ``ids``, ``len(ids)`` when absent.
+
+    Node ids span a small range: a lookup table over it beats a binary search per row.
+    """
+    if not len(ids) or not len(nodes):
+        return np.full(len(nodes), len(ids), dtype=np.intp)
+    lo, hi = min(int(ids[0]), int(nodes.min())), max(int(ids[-1]), int(nodes.max()))
+    if hi - lo > max(len(nodes), 1 << 16):   # ids far apart: the table would be too large
+        slot = np.searchsorted(ids, nodes)
+        slot[(slot == len(ids)) | (np.append(ids, 0)[slot] != nodes)] = len(ids)
+        return slot
+    table = np.full(hi - lo + 1, len(ids), dtype=np.intp)
+    table[ids - lo] = np.arange(len(ids))
+    return table[np.subtract(nodes, lo, dtype=np.intp)]
+
+
+def unify(run: RunData, opts: ClockOptions | None = None, sent_times: bool = True) -> pd.DataFrame:
     """Estimate clocks and add the unified time ``t_u`` to every table of ``run`` (in place).
 
-    Messages also get ``t_sent_u``: the sender's ``t_sent_s`` mapped with the sender's clock.
+    Messages also get ``t_sent_u`` (unless ``sent_times`` is False; no metric reads it): the sender's
+    ``t_sent_s`` mapped with the sender's clock.
     Returns the clock table, with the configured truth from ``run.json`` (``clocks``) beside it.
     """
     clocks = estimate_clocks(run.tables["messages"], run.nodes, opts)
     for frame in run.tables.values():
         frame[T] = to_unified(frame["t_s"], frame["node"], clocks)
-    msgs = run.tables["messages"]
-    msgs["t_sent_u"] = to_unified(msgs["t_sent_s"], msgs["src"].fillna(GROUND), clocks)
+    if sent_times:
+        msgs = run.tables["messages"]
+        msgs["t_sent_u"] = to_unified(msgs["t_sent_s"], msgs["src"].fillna(GROUND), clocks)
     return _with_truth(clocks, run.manifest.get("clocks") or {})
 
 

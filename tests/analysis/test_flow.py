@@ -180,3 +180,12 @@ def test_between_is_the_send_time_window(make_run, t0, t1):
     shuffled = got.sample(frac=1.0, random_state=0)   # not sorted: filtered, same rows
     pd.testing.assert_frame_equal(network.between(shuffled, t0, t1),
                                   shuffled[(shuffled["t_send"] >= t0) & (shuffled["t_send"] <= t1)])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_table_without_type_gives_the_flow_without_it(seed):
+    """The scalars-only load leaves the type out; every other column is the same."""
+    msgs = _messy_messages(seed)
+    full = flow.message_flow(msgs, 0.025)
+    got = flow.message_flow(msgs.drop(columns="type"), 0.025)
+    pd.testing.assert_frame_equal(got, full.drop(columns="type"), check_exact=True)

@@ -70,6 +70,7 @@ class AgentNode(Node):
         self._exec_done = False
         self._window_busy = False   # a stage change may release held tasks: drain even without mail
         self._state_every = t.state_every_ticks
+        self._lost_superior_ticks = t.lost_superior_ticks
         self.own_state_rows = True   # False: a fleet-wide log writes this drone's state rows
         self._log_state = kw["log"].appender("state")
         self._log_setpoint = kw["log"].appender("setpoints")
@@ -85,12 +86,15 @@ class AgentNode(Node):
             self.enter(Stage.ABORT, "link to the autopilot lost", failsafe=True)
         if self.inbox or self._window_busy or self.proximity:
             self._drain_inbox()
-        if self._heard_superior and self.stage not in TERMINAL:
-            self._watch_superior()
+        if self._heard_superior and self.stage not in TERMINAL:   # the superior watchdog
+            self._sup_silent += 1
+            if self._sup_silent > self._lost_superior_ticks:
+                self._hand_over("silent")
         if self.inferiors:
             self.age_inferiors()
-        self.complete = self._stage_work(tel)
-        self._publish(tel)
+        now = self.clock.now()   # the clock stands still within a tick: one reading for its records
+        self.complete = self._stage_work(tel, now)
+        self._publish(tel, now)
         if self.outbox.pending:
             self.retry_tasks()
         if self.own_state_rows and self.time.tick % self._state_every == 0:
@@ -200,7 +204,7 @@ class AgentNode(Node):
                 vehicle.disarm()
         call_hook(self, f"{stage.name.lower()} entry", self.algorithm.enter_stage, stage, self.ctx)
 
-    def _stage_work(self, tel: Telemetry) -> bool:
+    def _stage_work(self, tel: Telemetry, now: float) -> bool:
         stage = self.stage
         if stage in _LOOP_STAGES:
             if (stage is _EXECUTION and not tel.armed
@@ -218,7 +222,7 @@ class AgentNode(Node):
                 verdict = self.vehicle.setpoint(sp) or _OK
                 n, e, d = sp.ned
                 yaw = sp.yaw_rad
-                self._log_setpoint((self.clock.now(), self.time.tick, _KIND_NAMES[sp.kind], n, e, d,
+                self._log_setpoint((now, self.time.tick, _KIND_NAMES[sp.kind], n, e, d,
                                     _NAN if yaw is None else yaw, verdict.action, verdict.reason))
             if stage is _EXECUTION and complete != self._exec_done:
                 self._exec_done = complete
@@ -230,13 +234,6 @@ class AgentNode(Node):
         return True  # ICEBREAK, TERMINATION
 
     # -- superior watchdog ----------------------------------------------------------------------
-    def _watch_superior(self) -> None:
-        if not self._heard_superior:
-            return
-        self._sup_silent += 1
-        if self._sup_silent > self.timing.lost_superior_ticks:
-            self._hand_over("silent")
-
     def _hand_over(self, why: str) -> None:
         """The superior is gone (``silent``) or out of the mission (``aborted``): follow the next of
         its successors, or abort when none is left."""
@@ -263,9 +260,8 @@ class AgentNode(Node):
             self.enter(Stage.ABORT, reason)
 
     # -- outgoing -------------------------------------------------------------------------------
-    def _publish(self, tel: Telemetry) -> None:
+    def _publish(self, tel: Telemetry, now: float) -> None:
         node_id, net = self.node_id, self.net
-        now = self.clock.now()
         if net.has_subscribers(node_id):
             succ = tuple(call_hook(self, "successors", self.algorithm.successors, self.ctx))
             net.publish(Heartbeat(self.next_msg_id(), now, node_id, self.stage_code, succ,

@@ -21,14 +21,15 @@ class HoverDrone(DroneAlgorithm):
     def exec_once(self, ctx: DroneContext) -> None:
         n, e, _ = ctx.home_ned_m
         self.target = (n, e, -float(ctx.params["altitude_m"]))
+        self.setpoint = Setpoint.position(*self.target)   # the same every tick
+        self.hover_s = float(ctx.params["hover_s"])
         self.reached_at_s: float | None = None
 
     def exec_loop(self, ctx: DroneContext) -> Setpoint:
         if self.reached_at_s is None and ctx.has_reached(self.target, d_m=0.3):
             self.reached_at_s = ctx.stage_time_s
             ctx.mark("reached_altitude", altitude_m=-ctx.pos_ned_m[2])
-        return Setpoint.position(*self.target)
+        return self.setpoint
 
     def exec_complete(self, ctx: DroneContext) -> bool:
-        return (self.reached_at_s is not None
-                and ctx.stage_time_s - self.reached_at_s >= float(ctx.params["hover_s"]))
+        return self.reached_at_s is not None and ctx.stage_time_s - self.reached_at_s >= self.hover_s

@@ -132,7 +132,7 @@ class DeliveryGround(GroundAlgorithm):
             data = report.data
             if data == seen.get(drone):
                 continue
-            self._seen[drone] = data
+            seen[drone] = data
             for pid in decode_ids(data):
                 self._record(ctx, pid, drone)
             outstanding = self.outstanding.get(drone)

@@ -64,31 +64,52 @@ class SpillFile:
         self.hold_bytes = self.HOLD_BYTES if hold_bytes is None else hold_bytes
         self.writers: dict[str, pq.ParquetWriter] = {}
         self.layout: Layout = {}
-        #: per table, per entry of its layout: the batch held in memory, or None (next row group on disk)
-        self.held: dict[str, list[pa.RecordBatch | None]] = {}
+        #: per table, per entry of its layout: the batch held in memory, or the number of its row group
+        #: in the spill file (None: not written, its loss already reported)
+        self.held: dict[str, list[pa.RecordBatch | int | None]] = {}
+        self._groups: dict[str, int] = {}   # row groups written per table
         self._held_bytes = 0
 
     def write(self, chunk: Chunk) -> None:
-        node = np.repeat(np.asarray(chunk.nodes, np.int16), chunk.counts)
-        data = chunk.batch(node)
-        if self._held_bytes + data.nbytes <= self.hold_bytes:
-            self._held_bytes += data.nbytes
-            self.held.setdefault(chunk.table, []).append(data)
-        else:
-            self._spill(chunk.table, data)
-            self.held.setdefault(chunk.table, []).append(None)
-        offsets = np.concatenate([[0], np.cumsum(chunk.counts)[:-1]]).tolist()
-        self.layout.setdefault(chunk.table, []).append(
-            [(n, o, c) for n, o, c in zip(chunk.nodes, offsets, chunk.counts, strict=True)])
+        """Encode ``chunk`` and keep it in memory or append it to the spill file."""
+        data, spans = self.encode(chunk)
+        slot = self.place(chunk.table, data, spans)
+        if slot is not None:
+            self.append_group(chunk.table, data, slot)
 
-    def _spill(self, table: str, data: pa.RecordBatch) -> None:
+    @staticmethod
+    def encode(chunk: Chunk) -> tuple[pa.RecordBatch, list[tuple[int, int, int]]]:
+        """The chunk as one spill-schema record batch, and where each node's rows are in it."""
+        node = np.repeat(np.asarray(chunk.nodes, np.int16), chunk.counts)
+        offsets = np.concatenate([[0], np.cumsum(chunk.counts)[:-1]]).tolist()
+        return chunk.batch(node), list(zip(chunk.nodes, offsets, chunk.counts, strict=True))
+
+    def place(self, table: str, data: pa.RecordBatch, spans: list[tuple[int, int, int]]) -> int | None:
+        """Take note of an encoded batch. It is held in memory (returns None) while the held batches
+        stay under ``hold_bytes``; otherwise the caller appends it with :meth:`append_group` and the
+        slot returned, after every earlier batch of the table."""
+        nbytes = data.nbytes
+        entries = self.held.setdefault(table, [])
+        self.layout.setdefault(table, []).append(spans)
+        if self._held_bytes + nbytes <= self.hold_bytes:
+            self._held_bytes += nbytes
+            entries.append(data)
+            return None
+        entries.append(None)   # the row group's number once written; None if the write failed
+        return len(entries) - 1
+
+    def append_group(self, table: str, data: pa.RecordBatch, slot: int) -> None:
+        """Append a placed batch to the table's spill file as its next row group."""
         writer = self.writers.get(table)
         if writer is None:
             self.root.mkdir(parents=True, exist_ok=True)
             writer = pq.ParquetWriter(self.root / f"{table}.parquet", spill_schema(table),
                                       compression="lz4", use_dictionary=text_columns(table))
             self.writers[table] = writer
+            self._groups[table] = 0
         writer.write_batch(data, row_group_size=len(data))
+        self.held[table][slot] = self._groups[table]
+        self._groups[table] += 1
 
     def close(self) -> None:
         for writer in self.writers.values():
@@ -133,14 +154,12 @@ def _spilled(spill: SpillFile, table: str, pieces: dict[int, list[pa.Table]]) ->
     if not groups:
         return
     held_all = spill.held[table]
-    disk = None if all(h is not None for h in held_all) else pq.ParquetFile(spill.root / f"{table}.parquet")
-    on_disk = 0
+    on_disk = any(isinstance(h, int) for h in held_all)
+    disk = pq.ParquetFile(spill.root / f"{table}.parquet") if on_disk else None
     for spans, held in zip(groups, held_all, strict=True):
-        if held is None:
-            group = disk.read_row_group(on_disk)
-            on_disk += 1
-        else:
-            group = pa.Table.from_batches([held])
+        if held is None:   # its write failed (reported): its rows are lost, the others are not
+            continue
+        group = disk.read_row_group(held) if isinstance(held, int) else pa.Table.from_batches([held])
         group = group.drop_columns(["node"])
         for node, offset, count in spans:
             pieces.setdefault(node, []).append(group.slice(offset, count))

@@ -1,12 +1,13 @@
-"""The log writer as a process of its own: rows are encoded on another core, not under the run's GIL.
+"""The log writer as a process of its own: rows are encoded on another core.
 
-Turning buffered row tuples into Arrow columns costs ~0.3 µs per row, and a writer *thread* holds the
-interpreter lock while it does so: at 200 drones that is a fifth of the tick loop's time. Here the
-recorder's thread only serialises each hand-over with :mod:`marshal` (~0.1 µs per row, the cheapest
-encoding of plain tuples) and writes it to a pipe; this process decodes the rows, builds the record
-batches, appends them to the spill files and, at the end, cuts the per-node files
-(:mod:`swarmbox.record.spill`). The recorder starts it at its first hand-over, so a short run never
-starts it at all.
+Turning buffered row tuples into Arrow columns costs ~0.3 µs per row. With this writer the run's
+process only serialises each hand-over with :mod:`marshal` (~0.1 µs per row, the cheapest encoding of
+plain tuples) on its tick thread, and a background thread writes it to a pipe (the interpreter lock is
+released meanwhile); this process decodes the rows, builds the record batches, appends them to the
+spill files and, at the end, cuts the per-node files (:mod:`swarmbox.record.spill`). The recorder
+starts it at its first hand-over, so a short run never starts it at all. Measured on a 2-core machine
+it is no faster than encoding in the loop (``writer="thread"``, the default): the serialisation and the
+pipe cost the loop about what the encoding would.
 
 Protocol (pickled messages on stdin): ``("chunk", encoded)`` any number of times, then
 ``("close", [encoded tails], {node: tables}, logs_dir)``; the reply on stdout is the list of errors.
@@ -59,8 +60,14 @@ class WriterProcess:
     def started(self) -> bool:
         return self._proc is not None
 
-    def send(self, chunk: Chunk) -> None:
-        """Called on the recorder's thread: blocks while the process is behind (the pipe is full).
+    @staticmethod
+    def pack(chunk: Chunk) -> bytes:
+        """The message that carries ``chunk`` (built by the caller, on its own thread)."""
+        return pickle.dumps(("chunk", encode(chunk)), protocol=pickle.HIGHEST_PROTOCOL)
+
+    def send(self, chunk: Chunk, packed: bytes | None = None) -> None:
+        """Called on the recorder's background thread with the chunk and its :meth:`pack`: blocks while
+        the process is behind (the pipe is full).
 
         Raises :class:`WriterUnavailable` when the process cannot be started or dies before taking
         its first chunk (nothing is lost: the caller can write the chunk itself), OSError when it
@@ -71,7 +78,7 @@ class WriterProcess:
             except OSError as exc:
                 raise WriterUnavailable(f"cannot start {sys.executable}: {exc}") from exc
         try:
-            self._write(("chunk", encode(chunk)))
+            self._write_bytes(packed if packed is not None else self.pack(chunk))
         except OSError as exc:
             if not self._sent:
                 self.kill()
@@ -82,7 +89,10 @@ class WriterProcess:
     def _write(self, message: tuple) -> None:
         """One message, in as few system calls as the pipe allows: the lock is released during each,
         and taking it back from a busy tick loop is what costs."""
-        data = memoryview(pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL))
+        self._write_bytes(pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL))
+
+    def _write_bytes(self, packed: bytes) -> None:
+        data = memoryview(packed)
         fd = self._proc.stdin.fileno()
         while data:
             data = data[os.write(fd, data):]

@@ -138,8 +138,8 @@ class RunConfig:
     hook_timeout_s: Optional[float] = 10.0
     resume: bool = False            # skip a run whose directory holds a finished run (ok/aborted)
     runtime: str = "single"         # single: one process | processes: ground + one process per agent
-    # where log rows are encoded: thread (the run's process) | process (one of its own, another core) |
-    # auto: process for a simulated run with a core to spare, thread in a parallel sweep or in real time
+    # where log rows are encoded: thread (the run's process, during the loop) | process (one of its own,
+    # another core) | auto (= thread, measured the faster of the two)
     log_writer: str = "auto"
     net: NetConfig = field(default_factory=NetConfig)
 

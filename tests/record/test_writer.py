@@ -88,3 +88,28 @@ def test_only_text_columns_are_dictionary_encoded(tmp_path, monkeypatch, writer)
             chunk = meta.row_group(group).column(i)
             dictionary = any("DICTIONARY" in e for e in chunk.encodings)
             assert dictionary == (chunk.path_in_schema in ("kind", "type", "reason")), chunk.path_in_schema
+
+
+def test_a_failed_spill_write_loses_only_its_own_rows_and_is_named(tmp_path, monkeypatch):
+    """Beyond the memory hold, the thread appends batches to the spill file; one failing append (a full
+    disk) is reported at close, and every other hand-over's rows still reach the per-node files."""
+    monkeypatch.setattr(SpillFile, "HOLD_BYTES", 0)
+    real, calls = SpillFile.append_group, []
+
+    def flaky(self, table, data, slot):
+        calls.append(slot)
+        if len(calls) == 2:
+            raise OSError("No space left on device")
+        real(self, table, data, slot)
+
+    monkeypatch.setattr(SpillFile, "append_group", flaky)
+    rec = Recorder(tmp_path, flush_rows=4, writer="thread")
+    append = rec.node(0).appender("events")
+    for tick in range(12):
+        append(_event(tick, 0))
+        rec.maybe_flush()   # hand-overs of ticks 0-3, 4-7, 8-11
+    with pytest.raises(OSError, match="events rows of nodes \\[0\\].*No space left on device"):
+        rec.close()
+    assert len(calls) == 3
+    table = pq.read_table(tmp_path / "logs" / "drone_0" / "events.parquet")
+    assert table.column("tick").to_pylist() == [0, 1, 2, 3, 8, 9, 10, 11]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import pyarrow.parquet as pq
 import pytest
 
@@ -43,6 +45,28 @@ def test_a_writer_process_that_dies_fails_the_close_naming_it(tmp_path):
     rec._process._proc.kill()
     rec._process._proc.wait()
     with pytest.raises(OSError, match="log writer process"):
+        rec.close()
+
+
+def test_a_chunk_sent_to_a_dead_writer_process_is_named(tmp_path):
+    """A hand-over after the process died: the background thread records which rows it could not
+    send (and does not die itself), and the close reports them."""
+    rec = Recorder(tmp_path, flush_rows=5, writer="process")
+    append = rec.node(0).appender("stages")
+    for tick in range(10):
+        append((tick * 0.025, tick, 1, "ICEBREAK", ""))
+    rec.flush()
+    deadline = time.monotonic() + 30
+    while not rec._process._sent and time.monotonic() < deadline:   # the first chunk reached it
+        time.sleep(0.01)
+    rec._process._proc.kill()
+    rec._process._proc.wait()
+    for tick in range(10, 20):
+        append((tick * 0.025, tick, 1, "ICEBREAK", ""))
+    rec.flush()
+    rec._handover.finish()
+    assert rec._handover.errors and "stages rows of nodes [0]" in rec._handover.errors[0]
+    with pytest.raises(OSError, match="log writer failed: stages rows of nodes \\[0\\]"):
         rec.close()
 
 

@@ -26,10 +26,12 @@ from swarmbox.api import (
 from swarmbox.core.delivery import Window
 from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck, TaskCommand
 from swarmbox.core.node import STAGE_OF, Node, call_hook, hook_error
+from swarmbox.core.rows import NO_TEXT, TEXTS, pack_setpoint
 from swarmbox.core.stages import TERMINAL, Stage, path_to
 
-_KIND_NAMES = {SetpointKind.POSITION: "position", SetpointKind.VELOCITY: "velocity",
-               SetpointKind.ACCELERATION: "acceleration"}
+#: a setpoint kind's and an ok verdict's codes in the log's text table
+_KIND_CODES = {SetpointKind.POSITION: TEXTS.code("position"), SetpointKind.VELOCITY: TEXTS.code("velocity"),
+               SetpointKind.ACCELERATION: TEXTS.code("acceleration")}
 _LOOP_HOOK = {Stage.PREPARATION: "prep_loop/prep_complete", Stage.EXECUTION: "exec_loop/exec_complete"}
 # Enum members as globals for the per-tick paths (a class-attribute lookup costs several times more)
 _EXECUTION, _ABORT = Stage.EXECUTION, Stage.ABORT
@@ -43,6 +45,7 @@ _new_report = partial(tuple.__new__, Report)   # Report(*all 13 fields), built i
 _new_peer = partial(tuple.__new__, PeerState)
 _NAN3 = (_NAN, _NAN, _NAN)
 _OK = SetpointVerdict("ok")
+_OK_CODE = TEXTS.code("ok")
 
 
 class AgentNode(Node):
@@ -219,11 +222,15 @@ class AgentNode(Node):
                 if type(sp) is not Setpoint:
                     raise TypeError(f"drone {self.node_id}: exec_loop returned {type(sp).__name__}, "
                                     "expected Setpoint or None")
-                verdict = self.vehicle.setpoint(sp) or _OK
+                verdict = self.vehicle.setpoint(sp)
                 n, e, d = sp.ned
                 yaw = sp.yaw_rad
-                self._log_setpoint((now, self.time.tick, _KIND_NAMES[sp.kind], n, e, d,
-                                    _NAN if yaw is None else yaw, verdict.action, verdict.reason))
+                if verdict is None or verdict is _OK:
+                    action, why = _OK_CODE, NO_TEXT
+                else:
+                    action, why = TEXTS.code(verdict.action), TEXTS.code(verdict.reason)
+                self._log_setpoint(pack_setpoint(now, self.time.tick, _KIND_CODES[sp.kind], n, e, d,
+                                                 _NAN if yaw is None else yaw, action, why))
             if stage is _EXECUTION and complete != self._exec_done:
                 self._exec_done = complete
                 self.event("progress", "exec_complete" if complete else "exec_incomplete", self.node_id)

@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 from swarmbox.api.types import DescendantState
+from swarmbox.core.rows import TEXTS
 
 GROUND_ID = -1
 #: Pseudo-node id under which the simulated network records drops.
@@ -158,3 +159,5 @@ MESSAGE_TYPES: dict[type, str] = {
     TaskAck: "ack",
     ProxAlert: "prox",
 }
+#: Each message type's code in the log's text table (``swarmbox.core.rows``).
+MESSAGE_TYPE_CODES: dict[type, int] = {cls: TEXTS.code(name) for cls, name in MESSAGE_TYPES.items()}

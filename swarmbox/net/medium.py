@@ -22,10 +22,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmbox.core.clock import NodeClock, TimeSource
-from swarmbox.core.messages import BROADCAST, MESSAGE_TYPES, broadcast_dsts
+from swarmbox.core.messages import BROADCAST, MESSAGE_TYPE_CODES, broadcast_dsts
+from swarmbox.core.rows import DROP, NO_TEXT, RECV, SEND, TEXTS, pack_message
 
-Row = tuple
-Append = Callable[[Row], None]
+#: takes one packed ``messages`` row (``swarmbox.core.rows.pack_message``)
+Append = Callable[[bytes], None]
+
+
+_UNREACHABLE = TEXTS.code("unreachable")
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,12 +86,13 @@ class SimMedium:
         self._drop_log = drop_log or (lambda row: None)
         self._nodes: dict[int, _Endpoint] = {}
         self._subscribers: dict[int, list[int]] = {}
-        self._queue: list = []            # (arrival, tick, seq, dst, msg, type, nbytes), a heap
+        self._queue: list = []            # (arrival, tick, seq, dst, msg, type code, nbytes), a heap
         self._fifo: deque = deque()       # same items, for messages with the default constant delay
         self._seq = 0
         self.hooks: list[LinkHook] = []
         self._ideal = not (default.jitter_s or default.loss_prob)   # and no links or hooks: _plain()
-        self._fanout: dict[int, tuple[tuple[int, ...], str, bool]] = {}   # publisher -> dsts, text, reachable
+        #: publisher -> its subscribers, the text code of their list, whether all are reachable
+        self._fanout: dict[int, tuple[tuple[int, ...], int, bool]] = {}
 
     # -- membership -----------------------------------------------------------------------------
     def register(self, node_id: int, clock: NodeClock, log: Append) -> list:
@@ -134,10 +139,10 @@ class SimMedium:
         if not sender.connected:
             return
         t, tick = self._time.t_s, self._time.tick
-        mtype, nbytes = MESSAGE_TYPES[type(msg)], msg.nbytes
+        mtype, nbytes = MESSAGE_TYPE_CODES[type(msg)], msg.nbytes
         # a message is stamped with its sender's clock as it is sent: t_sent_s is that reading
         sent = msg.t_sent_s
-        sender.log((sent, tick, "send", msg.msg_id, mtype, src, BROADCAST, nbytes, sent, text))
+        sender.log(pack_message(sent, tick, SEND, msg.msg_id, mtype, src, BROADCAST, nbytes, sent, text))
         if reachable and self._plain():
             self._fifo.append((t + self._default.latency_s, tick, 0, dsts, msg, mtype, nbytes))
             return
@@ -149,11 +154,11 @@ class SimMedium:
         come and go with faults, so this is asked, not stored)."""
         return self._ideal and not self._links and not self.hooks
 
-    def _fan(self, src: int) -> tuple[tuple[int, ...], str, bool]:
+    def _fan(self, src: int) -> tuple[tuple[int, ...], int, bool]:
         dsts = tuple(self._subscribers.get(src, ()))
         nodes = self._nodes
         reachable = all(d in nodes and nodes[d].connected for d in dsts)
-        fan = self._fanout[src] = (dsts, broadcast_dsts(dsts), reachable)
+        fan = self._fanout[src] = (dsts, TEXTS.code(broadcast_dsts(dsts)), reachable)
         return fan
 
     def send(self, msg, dst: int) -> None:
@@ -162,9 +167,9 @@ class SimMedium:
         if not sender.connected:
             return
         t, tick = self._time.t_s, self._time.tick
-        mtype, nbytes = MESSAGE_TYPES[type(msg)], msg.nbytes
+        mtype, nbytes = MESSAGE_TYPE_CODES[type(msg)], msg.nbytes
         sent = msg.t_sent_s
-        sender.log((sent, tick, "send", msg.msg_id, mtype, src, dst, nbytes, sent, ""))
+        sender.log(pack_message(sent, tick, SEND, msg.msg_id, mtype, src, dst, nbytes, sent, NO_TEXT))
         if self._ideal and not self._links and not self.hooks:   # _plain(), inline: once per drone and tick
             receiver = self._nodes.get(dst)
             if receiver is not None and receiver.connected:   # ideal and reachable: no draw, FIFO
@@ -172,7 +177,7 @@ class SimMedium:
                 return
         self._route(msg, src, dst, t, tick, mtype, nbytes)
 
-    def _route(self, msg, src: int, dst: int, t: float, tick: int, mtype: str, nbytes: int) -> None:
+    def _route(self, msg, src: int, dst: int, t: float, tick: int, mtype: int, nbytes: int) -> None:
         """Impair one (message, destination) and queue it, or log its drop."""
         if not self._plain():
             spec = self._links.get((src, dst), self._default) if self._links else self._default
@@ -183,7 +188,8 @@ class SimMedium:
         if not reason and (receiver is None or not receiver.connected):
             reason = "unreachable"
         if reason:
-            self._drop_log((t, tick, "drop", msg.msg_id, mtype, src, dst, nbytes, msg.t_sent_s, reason))
+            self._drop_log(pack_message(t, tick, DROP, msg.msg_id, mtype, src, dst, nbytes, msg.t_sent_s,
+                                        TEXTS.code(reason)))
             return
         if delay == self._default.latency_s and not self._default.jitter_s:
             self._fifo.append((t + delay, tick, 0, dst, msg, mtype, nbytes))   # arrival order kept
@@ -204,7 +210,8 @@ class SimMedium:
                 arrival, _, _, _, msg, mtype, nbytes = item
                 if ep is not last_ep or arrival != last_arrival:   # e.g. every Report to the ground
                     last_ep, last_arrival, local = ep, arrival, ep.clock.at(arrival)
-                ep.log((local, tick, "recv", msg.msg_id, mtype, msg.src, dst, nbytes, msg.t_sent_s, ""))
+                ep.log(pack_message(local, tick, RECV, msg.msg_id, mtype, msg.src, dst, nbytes, msg.t_sent_s,
+                                    NO_TEXT))
                 ep.inbox.append(msg)
             else:
                 self._hand_over(item, tick)
@@ -218,17 +225,18 @@ class SimMedium:
             for d in dst:
                 ep = nodes[d]
                 if ep.connected:
-                    ep.log((ep.clock.at(arrival), tick, "recv", msg_id, mtype, src, d, nbytes, t_sent_s, ""))
+                    ep.log(pack_message(ep.clock.at(arrival), tick, RECV, msg_id, mtype, src, d, nbytes,
+                                        t_sent_s, NO_TEXT))
                     ep.inbox.append(msg)
                 else:
-                    self._drop_log((arrival, tick, "drop", msg_id, mtype, src, d, nbytes, t_sent_s,
-                                    "unreachable"))
+                    self._drop_log(pack_message(arrival, tick, DROP, msg_id, mtype, src, d, nbytes, t_sent_s,
+                                                _UNREACHABLE))
             return
         ep = self._nodes[dst]
         if not ep.connected:
-            self._drop_log((arrival, tick, "drop", msg.msg_id, mtype, msg.src, dst, nbytes, msg.t_sent_s,
-                            "unreachable"))
+            self._drop_log(pack_message(arrival, tick, DROP, msg.msg_id, mtype, msg.src, dst, nbytes,
+                                        msg.t_sent_s, _UNREACHABLE))
             return
-        ep.log((ep.clock.at(arrival), tick, "recv", msg.msg_id, mtype, msg.src, dst, nbytes,
-                msg.t_sent_s, ""))
+        ep.log(pack_message(ep.clock.at(arrival), tick, RECV, msg.msg_id, mtype, msg.src, dst, nbytes,
+                            msg.t_sent_s, NO_TEXT))
         ep.inbox.append(msg)

@@ -25,12 +25,14 @@ import numpy as np
 import zenoh
 
 from swarmbox.core.clock import NodeClock, TimeSource
-from swarmbox.core.messages import MESSAGE_TYPES, NO_SUBJECT, Heartbeat
+from swarmbox.core.messages import MESSAGE_TYPE_CODES, NO_SUBJECT, Heartbeat
+from swarmbox.core.rows import DROP, NO_TEXT, RECV, SEND, TEXTS, pack_message
 from swarmbox.net.auth import AuthSpec, Rejected, Signer, Verifier
 from swarmbox.net.codec import DecodeError, decode, encode
 from swarmbox.net.medium import LinkHook, LinkSpec
 
-Append = Callable[[tuple], None]
+Append = Callable[[bytes], None]   # one packed ``messages`` row
+_REJECTED = TEXTS.code("rejected")
 
 
 def session_config(listen: str, peers: list[str]) -> zenoh.Config:
@@ -122,8 +124,8 @@ class ZenohMedium:
         self.bytes_out += len(frame)
 
     def _log_send(self, msg, dst: int, nbytes: int) -> None:
-        self._log((self._clock.now(), self._time.tick, "send", msg.msg_id, MESSAGE_TYPES[type(msg)],
-                   msg.src, dst, nbytes, msg.t_sent_s, ""))
+        self._log(pack_message(self._clock.now(), self._time.tick, SEND, msg.msg_id,
+                               MESSAGE_TYPE_CODES[type(msg)], msg.src, dst, nbytes, msg.t_sent_s, NO_TEXT))
 
     def _on_sample(self, sample) -> None:
         self._arrived.append((wall.time(), bytes(sample.payload.to_bytes())))
@@ -158,8 +160,9 @@ class ZenohMedium:
         spec = self._links.get((src, dst), self._default) if self._links else self._default
         delay, reason = spec.impair(self._rng, self.hooks, msg, src, dst, arrival)
         if reason:
-            self._log((self._clock.at(arrival), self._time.tick, "drop", msg.msg_id, MESSAGE_TYPES[type(msg)],
-                       src, dst, len(frame), msg.t_sent_s, reason))
+            self._log(pack_message(self._clock.at(arrival), self._time.tick, DROP, msg.msg_id,
+                                   MESSAGE_TYPE_CODES[type(msg)], src, dst, len(frame), msg.t_sent_s,
+                                   TEXTS.code(reason)))
         elif delay <= 0:
             self._hand_over(arrival, msg, len(frame))
         else:
@@ -168,13 +171,14 @@ class ZenohMedium:
 
     def _reject(self, arrival: float, reason: str, sender: int | None, nbytes: int) -> None:
         src = NO_SUBJECT if sender is None else sender
-        self._log((self._clock.at(arrival), self._time.tick, "drop", 0, "rejected", src, self.node_id, nbytes,
-                   float("nan"), reason))
+        self._log(pack_message(self._clock.at(arrival), self._time.tick, DROP, 0, _REJECTED, src,
+                               self.node_id, nbytes, float("nan"), TEXTS.code(reason)))
         self._on_reject(reason, sender)
 
     def _hand_over(self, arrival: float, msg, nbytes: int) -> None:
-        self._log((self._clock.at(arrival), self._time.tick, "recv", msg.msg_id, MESSAGE_TYPES[type(msg)],
-                   msg.src, self.node_id, nbytes, msg.t_sent_s, ""))
+        self._log(pack_message(self._clock.at(arrival), self._time.tick, RECV, msg.msg_id,
+                               MESSAGE_TYPE_CODES[type(msg)], msg.src, self.node_id, nbytes, msg.t_sent_s,
+                               NO_TEXT))
         self.inbox.append(msg)
 
     def close(self) -> None:

@@ -18,12 +18,13 @@ from swarmbox.record.schema import SCHEMA_VERSION, TABLES
 
 _TYPES = {"float64": pa.float64(), "int64": pa.int64(), "int32": pa.int32(), "int16": pa.int16(),
           "int8": pa.int8(), "bool": pa.bool_(), "string": pa.string()}
-_NUMPY = {pa.float64(): np.float64, pa.int64(): np.int64, pa.int32(): np.int32, pa.int16(): np.int16,
+NUMPY = {pa.float64(): np.float64, pa.int64(): np.int64, pa.int32(): np.int32, pa.int16(): np.int16,
           pa.int8(): np.int8}
 #: The column the spill files add to every table: which node wrote the row.
 NODE = pa.field("node", pa.int16())
 
 
+@cache
 def arrow_schema(table: str) -> pa.Schema:
     """The declared schema of one per-node table, with units and docs as field metadata."""
     cols = TABLES[table]
@@ -31,6 +32,7 @@ def arrow_schema(table: str) -> pa.Schema:
     return pa.schema(fields, metadata={"swarmbox.schema": SCHEMA_VERSION, "swarmbox.table": table})
 
 
+@cache
 def spill_schema(table: str) -> pa.Schema:
     """A table's schema plus the writing node, for the run-wide spill file."""
     return arrow_schema(table).append(NODE)
@@ -47,17 +49,17 @@ def column(values: Sequence, typ: pa.DataType) -> pa.Array:
     """One Arrow column built from raw buffers (``pa.array`` on Python objects would import pandas)."""
     n = len(values)
     if typ == pa.string():
-        return _strings(values)
+        return strings(values)
     if typ == pa.bool_():
         bits = np.packbits(np.asarray(values, dtype=bool), bitorder="little")
         return pa.Array.from_buffers(typ, n, [None, pa.py_buffer(bits)])
-    return pa.Array.from_buffers(typ, n, [None, pa.py_buffer(np.asarray(values, dtype=_NUMPY[typ]))])
+    return pa.Array.from_buffers(typ, n, [None, pa.py_buffer(np.asarray(values, dtype=NUMPY[typ]))])
 
 
-def _strings(values: Sequence[str]) -> pa.Array:
+def strings(values: Sequence[str]) -> pa.Array:
     n = len(values)
     if type(values) is list and n and values.count(values[0]) == n and n * len(values[0].encode()) < 2**31:
-        return _repeated(values[0], n)   # one value throughout (a setpoint's kind, "ok", ""): no scan
+        return repeated(values[0], n)   # one value throughout (a setpoint's kind, "ok", ""): no scan
     joined = "".join(values)
     data = joined.encode()
     offsets = np.zeros(n + 1, dtype=np.int64)
@@ -72,7 +74,7 @@ def _strings(values: Sequence[str]) -> pa.Array:
     return big.cast(pa.string())
 
 
-def _repeated(value: str, n: int) -> pa.Array:
+def repeated(value: str, n: int) -> pa.Array:
     """``n`` copies of ``value`` as a string column (int32 offsets: fewer than 2**31 bytes in all)."""
     data = value.encode()
     offsets = np.arange(n + 1, dtype=np.int32) * np.int32(len(data))
@@ -83,8 +85,8 @@ def _field(rows: Sequence[tuple], index: int, typ: pa.DataType) -> pa.Array:
     """Column ``index`` of ``rows``: numbers straight into numpy (``zip(*rows)`` would build a tuple
     per column first and costs twice as much)."""
     n = len(rows)
-    if typ in _NUMPY:
-        values = np.fromiter(map(itemgetter(index), rows), dtype=_NUMPY[typ], count=n)
+    if typ in NUMPY:
+        values = np.fromiter(map(itemgetter(index), rows), dtype=NUMPY[typ], count=n)
         return pa.Array.from_buffers(typ, n, [None, pa.py_buffer(values)])
     return column(list(map(itemgetter(index), rows)), typ)
 
@@ -100,5 +102,5 @@ def batch(table: str, rows: Sequence[tuple], node: np.ndarray | None = None) -> 
 
 def numbers(values: np.ndarray, typ: pa.DataType) -> pa.Array:
     """A numeric Arrow column over a numpy array's buffer (``pa.array(ndarray)`` imports pandas)."""
-    data = np.ascontiguousarray(values, _NUMPY[typ])
+    data = np.ascontiguousarray(values, NUMPY[typ])
     return pa.Array.from_buffers(typ, len(data), [None, pa.py_buffer(data)])

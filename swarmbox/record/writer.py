@@ -38,6 +38,7 @@ import numpy as np
 import pyarrow as pa
 
 from swarmbox.record.blocks import StateBlocks
+from swarmbox.record.packed import PACKED, packed_batch, row_size
 from swarmbox.record.schema import node_name
 from swarmbox.record.spill import TABLES, Chunk, SpillFile, split
 from swarmbox.record.worker import WriterProcess, WriterUnavailable
@@ -52,19 +53,23 @@ WRITERS = ("thread", "process")
 
 
 class NodeLog:
-    """One node's tables. ``appender(table)`` returns a bound ``list.append`` for the hot path."""
+    """One node's tables. ``appender(table)`` returns a bound method for the hot path: ``list.append``
+    of a row tuple, or for the packed tables (``messages``, ``setpoints``) ``bytearray.extend`` of a
+    row packed by :mod:`swarmbox.core.rows`."""
 
     def __init__(self, node_id: int, tables: tuple[str, ...]) -> None:
         self.node_id, self.node = node_id, node_name(node_id)
         self.tables = tables
-        self.rows: dict[str, list[tuple]] = {t: [] for t in tables}
+        self.rows: dict[str, list[tuple]] = {t: [] for t in tables if t not in PACKED}
+        self.packed: dict[str, bytearray] = {t: bytearray() for t in tables if t in PACKED}
 
-    def appender(self, table: str) -> Callable[[tuple], None]:
-        # Hand-overs empty this same list in place, so the bound method stays valid.
-        return self.rows[table].append
+    def appender(self, table: str) -> Callable[[Any], None]:
+        # Hand-overs empty this same list or bytearray in place, so the bound method stays valid.
+        packed = self.packed.get(table)
+        return packed.extend if packed is not None else self.rows[table].append
 
     def pending_rows(self) -> int:
-        return sum(map(len, self.rows.values()))
+        return sum(map(len, self.rows.values())) + sum(len(b) // row_size(t) for t, b in self.packed.items())
 
 
 class _Group(NamedTuple):
@@ -226,6 +231,8 @@ class Recorder:
         if table == "state" and self._blocks.rows:
             nodes, counts, data = self._blocks.take(self.logs)
             return Chunk(table, nodes, counts, [], data)
+        if table in PACKED:
+            return self._take_packed(table)
         nodes, counts, flat = [], [], []
         for log in self.logs.values():
             rows = log.rows.get(table)
@@ -235,6 +242,23 @@ class Recorder:
                 flat.extend(rows)
                 rows.clear()
         return Chunk(table, nodes, counts, flat) if nodes else None
+
+    def _take_packed(self, table: str) -> Chunk | None:
+        """Empty every node's packed rows of ``table`` into one chunk, already a record batch."""
+        size = row_size(table)
+        nodes, counts, parts = [], [], []
+        for log in self.logs.values():
+            buf = log.packed.get(table)
+            if buf:
+                nodes.append(log.node_id)
+                counts.append(len(buf) // size)
+                parts.append(buf)
+        if not nodes:
+            return None
+        data = packed_batch(table, b"".join(parts))   # a copy: the buffers can be emptied
+        for buf in parts:
+            del buf[:]
+        return Chunk(table, nodes, counts, [], data)
 
     def close(self) -> None:
         """Write everything out as per-node files; raise OSError naming what could not be written.

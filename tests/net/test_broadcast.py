@@ -7,6 +7,7 @@ import pyarrow as pa
 
 from swarmbox.core.clock import NodeClock, TimeSource
 from swarmbox.core.messages import BROADCAST, Heartbeat
+from swarmbox.core.rows import unpacking
 from swarmbox.net.medium import LinkSpec, SimMedium
 from swarmbox.record.broadcast import expand_broadcasts
 from swarmbox.record.columns import batch
@@ -17,9 +18,9 @@ TICK = 0.025
 def _net(default=LinkSpec()):
     time = TimeSource()
     drops: list[tuple] = []
-    medium = SimMedium(time, np.random.default_rng(3), default, None, drops.append)
+    medium = SimMedium(time, np.random.default_rng(3), default, None, unpacking(drops))
     logs = {n: [] for n in (-1, 0, 1, 2)}
-    inbox = {n: medium.register(n, NodeClock(time), logs[n].append) for n in logs}
+    inbox = {n: medium.register(n, NodeClock(time), unpacking(logs[n])) for n in logs}
     for n in (0, 1, 2):
         medium.subscribe(n, -1)
     return time, medium, logs, inbox, drops

@@ -3,6 +3,7 @@ import pytest
 
 from swarmbox.core.clock import ClockSpec, NodeClock, TimeSource
 from swarmbox.core.messages import TaskAck
+from swarmbox.core.rows import unpacking
 from swarmbox.net.medium import LinkSpec, SimMedium
 
 TICK = 0.025
@@ -14,11 +15,11 @@ class Net:
     def __init__(self, seed=1, default=LinkSpec(), links=None, drone_clock=ClockSpec()):
         self.time = TimeSource()
         self.drops = []
-        self.medium = SimMedium(self.time, np.random.default_rng(seed), default, links, self.drops.append)
+        self.medium = SimMedium(self.time, np.random.default_rng(seed), default, links, unpacking(self.drops))
         self.logs = {-1: [], 0: []}
         self.inbox = {
-            -1: self.medium.register(-1, NodeClock(self.time), self.logs[-1].append),
-            0: self.medium.register(0, NodeClock(self.time, drone_clock), self.logs[0].append),
+            -1: self.medium.register(-1, NodeClock(self.time), unpacking(self.logs[-1])),
+            0: self.medium.register(0, NodeClock(self.time, drone_clock), unpacking(self.logs[0])),
         }
         self.seq = 0
 

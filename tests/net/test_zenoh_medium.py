@@ -10,6 +10,7 @@ import zenoh
 
 from swarmbox.core.clock import NodeClock, TimeSource
 from swarmbox.core.messages import Heartbeat, TaskAck
+from swarmbox.core.rows import unpacking
 from swarmbox.net.auth import AuthSpec, Signer
 from swarmbox.net.codec import encode
 from swarmbox.net.medium import LinkSpec
@@ -25,7 +26,7 @@ def _node(node_id, locators, mission, default=LinkSpec()):
     medium = ZenohMedium(node_id, time=time_src, true_of=lambda w: w - 0.0, auth=AuthSpec(KEY, mission),
                          listen=me, peers=[v for k, v in locators.items() if k != node_id],
                          rng=np.random.default_rng(0), default=default, subscribers={-1: [0]})
-    medium.register(node_id, NodeClock(time_src), rows.append)
+    medium.register(node_id, NodeClock(time_src), unpacking(rows))
     return medium, time_src, rows
 
 

@@ -7,6 +7,7 @@ import math
 import pyarrow.parquet as pq
 import pytest
 
+from swarmbox.core.rows import NO_TEXT, RECV, SEND, TEXTS, pack_message
 from swarmbox.record.schema import SCHEMA_VERSION
 from swarmbox.record.spill import SpillFile
 from swarmbox.record.writer import WRITERS, Recorder
@@ -77,8 +78,8 @@ def test_only_text_columns_are_dictionary_encoded(tmp_path, monkeypatch, writer)
     rec = Recorder(tmp_path, flush_rows=50, writer=writer)   # rows via the spill file and from memory
     append = rec.node(0).appender("messages")
     for tick in range(400):
-        append((tick * 0.025, tick, "send" if tick % 2 else "recv", tick, "report", 0, -1, 120,
-                tick * 0.025 - 0.01, ""))
+        append(pack_message(tick * 0.025, tick, SEND if tick % 2 else RECV, tick, TEXTS.code("report"), 0, -1,
+                            120, tick * 0.025 - 0.01, NO_TEXT))
         if tick == 200:
             rec.flush()
     rec.close()

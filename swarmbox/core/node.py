@@ -39,9 +39,10 @@ class Transport(Protocol):
 
 
 class NodeLog(Protocol):
-    """Where a node writes its rows (see ``swarmbox.record.schema`` for the columns)."""
+    """Where a node writes its rows (see ``swarmbox.record.schema`` for the columns): a row tuple, or
+    for the packed tables (``messages``, ``setpoints``) a row packed by :mod:`swarmbox.core.rows`."""
 
-    def appender(self, table: str) -> Callable[[Row], None]: ...
+    def appender(self, table: str) -> Callable[[Row | bytes], None]: ...
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,8 +1,9 @@
 """Rows to Arrow columns, without pandas (an agent process must not load it).
 
-Nodes buffer plain tuples, the cheapest thing to append in the tick loop; the background writer turns
-a chunk of them into one Arrow record batch per table. The conversion runs once per chunk of many
-nodes' rows (not once per node), so its fixed costs do not grow with the swarm.
+Nodes buffer the rare tables' rows as plain tuples; the recorder turns a chunk of them into one Arrow
+record batch per table. The conversion runs once per chunk of many nodes' rows (not once per node), so
+its fixed costs do not grow with the swarm. (The frequent tables are packed instead:
+:mod:`swarmbox.record.packed`.)
 """
 
 from __future__ import annotations

@@ -1,22 +1,25 @@
 """Per-node logs of one run: encoded in chunks during the loop, written to disk off the tick thread.
 
-The tick loop only appends tuples to per-node lists. Once ``flush_rows`` rows are buffered (the
-runner checks once per simulated second, so the check costs nothing per row) the recorder *hands the
-lists over*: it copies their contents into one chunk per table and empties them, which is a pointer
-copy. With ``writer="thread"`` (the default) the tick thread then turns each chunk — all nodes at once
-— into one Arrow batch, kept in memory up to :attr:`SpillFile.HOLD_BYTES
+The tick loop only appends to per-node buffers: the ``messages`` and ``setpoints`` rows (several per
+drone and tick) as rows packed by :mod:`swarmbox.core.rows` onto a ``bytearray``, the rare tables
+(``stages``, ``events``) as tuples on a list, and a simulated fleet's ``state`` rows as numpy blocks
+(:mod:`swarmbox.record.fleet`). Once ``flush_rows`` rows are buffered (the runner checks once per
+simulated second, so the check costs nothing per row) the recorder *hands the buffers over*: one
+chunk per table, all nodes at once. With ``writer="thread"`` (the default) the tick thread turns each
+chunk into one Arrow batch — for packed rows a numpy view of the joined bytes, no per-row work; for
+tuples a column-by-column conversion — kept in memory up to :attr:`SpillFile.HOLD_BYTES
 <swarmbox.record.spill.SpillFile.HOLD_BYTES>`; beyond that a background thread appends the batches to
 a run-wide spill file as row groups (Parquet encoding and I/O run with the interpreter lock released).
 With ``writer="process"`` the tick thread serialises each chunk and a background thread pipes it to a
-writer process that does all of that on another core (:mod:`swarmbox.record.worker`).
+writer process that does the rest on another core (:mod:`swarmbox.record.worker`).
 
 Why the tick thread encodes: a thread that takes the chunks while the loop runs has to win the
 interpreter lock from it for every step of its work, and on a busy 2-core machine those hand-offs cost
-far more than the work itself — a 5-drone delivery run of the RQ4 study took 3.2 CPU s with the
-encoding on a background thread and 2.45 with the same encoding done in the loop, and a 36-drone
-hover's real-time factor went from 62 (writer process) to 72. Encoding a row costs ~0.3 µs, every
-chunk the same, so the loop's cost per row, and its recorded real-time factor, do not depend on how
-long the run is. The loop never waits for disk, only for a full hand-over queue (bounded memory).
+more than the work itself. Why packed rows: turning millions of row tuples back into columns, cold in
+the cache by the time of the hand-over, cost ~0.7 µs a row — a quarter of a 200-drone tick loop —
+while packing a row costs what building the tuple did. Every chunk costs the same per row, so the
+loop's cost per row, and its recorded real-time factor, do not depend on how long the run is. The loop
+never waits for disk, only for a full hand-over queue (bounded memory).
 
 At the end the spill files and the rows still buffered are cut into the per-node layout of
 :mod:`swarmbox.record.schema`, ``logs/<node>/<table>.parquet`` (:mod:`swarmbox.record.spill`); a

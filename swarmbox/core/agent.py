@@ -19,7 +19,6 @@ from swarmbox.api import (
     PeerState,
     Setpoint,
     SetpointKind,
-    SetpointVerdict,
     Task,
     Telemetry,
 )
@@ -44,7 +43,6 @@ _new_state = partial(tuple.__new__, DroneState)
 _new_report = partial(tuple.__new__, Report)   # Report(*all 13 fields), built in C
 _new_peer = partial(tuple.__new__, PeerState)
 _NAN3 = (_NAN, _NAN, _NAN)
-_OK = SetpointVerdict("ok")
 _OK_CODE = TEXTS.code("ok")
 
 
@@ -225,7 +223,7 @@ class AgentNode(Node):
                 verdict = self.vehicle.setpoint(sp)
                 n, e, d = sp.ned
                 yaw = sp.yaw_rad
-                if verdict is None or verdict is _OK:
+                if verdict is None or (verdict.action == "ok" and not verdict.reason):   # the usual case
                     action, why = _OK_CODE, NO_TEXT
                 else:
                     action, why = TEXTS.code(verdict.action), TEXTS.code(verdict.reason)

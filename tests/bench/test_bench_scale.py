@@ -1,9 +1,10 @@
 """Throughput benchmarks with a committed baseline (``.ci/bench.sh`` compares against it).
 
 Each entry times one stage that must stay flat per drone as swarms grow: the whole hover run
-(tick loop + log writing), the recorder alone, the k-d tree separation at 1,000 drones, and the
-analysis of a 36-drone run. ``extra_info`` carries throughput figures (agent-steps/s, rows/s).
-Without ``--benchmark-enable`` each runs once, as an ordinary (fast) test of its result.
+(tick loop + log writing), the recorder alone (state rows; packed message rows), the k-d tree
+separation at 1,000 drones, and the analysis of a 36-drone run. ``extra_info`` carries throughput
+figures (agent-steps/s, rows/s). Without ``--benchmark-enable`` each runs once, as an ordinary (fast)
+test of its result.
 
 Baseline: ``tests/bench/baseline/`` (``.ci/bench.sh --update-baseline`` after an intended change).
 """
@@ -16,6 +17,7 @@ import pytest
 from swarmbox.analysis import metrics
 from swarmbox.analysis.report import analyze_run
 from swarmbox.bench.hover import hover_run
+from swarmbox.core.rows import NO_TEXT, RECV, SEND, TEXTS, pack_message
 from swarmbox.record.writer import Recorder
 
 
@@ -53,6 +55,36 @@ def test_recorder_200_drones(benchmark, tmp_path_factory):
     ticks = pq.read_table(run_dir / "logs" / "drone_199" / "state.parquet", columns=["tick"])["tick"]
     assert ticks.to_pylist() == list(range(400))
     benchmark.extra_info.update(rows=rows)
+
+
+def test_recorder_messages_200_drones(benchmark, tmp_path_factory):
+    """The tick loop's busiest rows: per drone and tick a Report sent and received and a Heartbeat
+    received, packed as the medium writes them, handed over and written per node."""
+    report, heartbeat = TEXTS.code("report"), TEXTS.code("heartbeat")
+
+    def write():
+        run_dir = tmp_path_factory.mktemp("msg")
+        recorder = Recorder(run_dir, flush_rows=20_000)
+        ground = recorder.node(-1).appender("messages")
+        drones = [recorder.node(d).appender("messages") for d in range(200)]
+        for tick in range(400):
+            t = tick * 0.025
+            for d, append in enumerate(drones):
+                msg_id = ((d + 2) << 40) | tick
+                append(pack_message(t, tick, SEND, msg_id, report, d, -1, 120, t, NO_TEXT))
+                ground(pack_message(t + 0.025, tick + 1, RECV, msg_id, report, d, -1, 120, t, NO_TEXT))
+                append(pack_message(t, tick, RECV, tick, heartbeat, -1, d, 40, t, NO_TEXT))
+            if tick % 40 == 0:
+                recorder.maybe_flush()
+        recorder.close()
+        return run_dir
+
+    run_dir = benchmark.pedantic(write, rounds=3, iterations=1)
+    import pyarrow.parquet as pq
+
+    ground = pq.read_table(run_dir / "logs" / "ground" / "messages.parquet", columns=["src", "kind"])
+    assert ground.num_rows == 200 * 400 and set(ground.column("kind").to_pylist()) == {"recv"}
+    benchmark.extra_info.update(rows=3 * 200 * 400)
 
 
 def test_separation_1000_drones(benchmark):

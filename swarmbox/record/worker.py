@@ -1,10 +1,11 @@
 """The log writer as a process of its own: rows are encoded on another core.
 
-Turning buffered row tuples into Arrow columns costs ~0.3 µs per row. With this writer the run's
-process only serialises each hand-over with :mod:`marshal` (~0.1 µs per row, the cheapest encoding of
-plain tuples) on its tick thread, and a background thread writes it to a pipe (the interpreter lock is
-released meanwhile); this process decodes the rows, builds the record batches, appends them to the
-spill files and, at the end, cuts the per-node files (:mod:`swarmbox.record.spill`). The recorder
+With this writer the run's process only serialises each hand-over on its tick thread — the rare
+tables' row tuples with :mod:`marshal` (~0.1 µs per row, the cheapest encoding of plain tuples), the
+packed and state tables as the record batches they already are — and a background thread writes it
+to a pipe (the interpreter lock is released meanwhile); this process decodes the rows, builds the
+remaining record batches, appends them to the spill files and, at the end, cuts the per-node files
+(:mod:`swarmbox.record.spill`). The recorder
 starts it at its first hand-over, so a short run never starts it at all. Measured on a 2-core machine
 it is no faster than encoding in the loop (``writer="thread"``, the default): the serialisation and the
 pipe cost the loop about what the encoding would.

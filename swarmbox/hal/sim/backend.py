@@ -174,8 +174,8 @@ class SimBackend:
         self.ctrl.update(self._est, self._vel, self._accel_scale, dt_s)
         self._integrate_vertical()
         w = self._world
-        np.multiply(self._acc_xy, self._free_kg, out=w.cmd_force_xy)
-        np.multiply(self._vel_xy, self._free, out=w.cmd_vel_xy)
+        np.multiply(self._acc_xy, self._free_kg, w.cmd_force_xy)
+        np.multiply(self._vel_xy, self._free, w.cmd_vel_xy)
         self._k += 1
         self._event_t_s = t_next = self._t0_s + self._k * dt_s   # no round-off creep over long runs
         w.step(dt_s, self._substeps)
@@ -183,8 +183,8 @@ class SimBackend:
         self.t_s = t_next
         if self._gnss.due(self.t_s):
             self._gnss_fix()
-        np.add(self._pos, self._gnss.err_ned_m, out=self._est)
-        np.multiply(self.airborne, self._vert_k[1], out=self._tmp)
+        np.add(self._pos, self._gnss.err_ned_m, self._est)
+        np.multiply(self.airborne, self._vert_k[1], self._tmp)
         self._air_s += self._tmp
         if self._supervised:
             self._supervise()
@@ -217,16 +217,16 @@ class SimBackend:
         damping, dt = self._vert_k
         pos_d, vel_d, acc_d, tmp = self._pos_d, self._vel_d, self._acc_d, self._tmp
         # on the ground with thrust at or below hover, a vehicle stays put (horizontally too)
-        np.less(acc_d, self._zeros, out=self._free)
+        np.less(acc_d, self._zeros, self._free)
         np.maximum(self._free, self.airborne, out=self._free)
-        np.multiply(self._free, self._mass_kg, out=self._free_kg)
+        np.multiply(self._free, self._mass_kg, self._free_kg)
         vel_d *= damping
-        np.multiply(acc_d, dt, out=tmp)
+        np.multiply(acc_d, dt, tmp)
         vel_d += tmp
-        np.multiply(vel_d, dt, out=tmp)
+        np.multiply(vel_d, dt, tmp)
         pos_d += tmp
         np.minimum(pos_d, self._zeros, out=pos_d)
-        np.less(pos_d, self._zeros, out=self.airborne)
+        np.less(pos_d, self._zeros, self.airborne)
         vel_d *= self.airborne
 
     def _apply_crashes(self) -> None:
@@ -331,8 +331,8 @@ class SimBackend:
         """Every vehicle's battery fraction now (computed once per step; do not modify)."""
         if not self._battery_ok:
             b = self._battery
-            np.divide(self._air_s, self.params.battery_endurance_s, out=b)
-            np.subtract(1.0, b, out=b)
+            np.divide(self._air_s, self.params.battery_endurance_s, b)
+            np.subtract(1.0, b, b)
             np.maximum(b, 0.0, out=b)   # = np.clip(b, 0, 1): the time in the air is >= 0, so b <= 1
             self._battery_ok = True
         return self._battery
@@ -357,7 +357,7 @@ class SimBackend:
             np.concatenate((self._est, self._vel, g.fix_ned_m, self._pos), out=values[:12])
             np.copyto(values[12], self.ctrl.yaw_rad)
             np.copyto(values[13], self.battery_frac())
-            np.equal(self.airborne, 0.0, out=landed)
+            np.equal(self.airborne, 0.0, landed)
         else:
             values[:12] = np.concatenate((self._est, self._vel, g.fix_ned_m, self._pos))[:, index]
             values[12], values[13] = self.ctrl.yaw_rad[index], self.battery_frac()[index]

@@ -62,11 +62,11 @@ class GnssEstimator:
         err_fix *= self._sigma
         err_fix *= self.noise_scale
         err_fix += self.offset_ned_m.T              # now fix − truth
-        np.subtract(err_fix, self.err_ned_m, out=innov)   # fix − estimate
+        np.subtract(err_fix, self.err_ned_m, innov)   # fix − estimate
         ok = avail & (np.hypot(innov[0], innov[1]) <= self.p.est_gate_m)
         self.err_ned_m += innov * (self.p.est_gain * ok)
         np.copyto(self._last_accept_s, t_s, where=ok)
-        np.add(true_pos_ned_m, err_fix, out=self._fix)
+        np.add(true_pos_ned_m, err_fix, self._fix)
         np.copyto(self.fix_ned_m, self._fix, where=avail)
         self.seq += avail
         rejected = avail & ~ok

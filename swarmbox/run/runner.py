@@ -20,6 +20,7 @@ import time
 import traceback
 from collections.abc import Callable
 from datetime import UTC, datetime
+from functools import cache
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -54,16 +55,25 @@ def write_atomic(path: Path, text: str) -> None:
 
 
 def _versions() -> dict[str, str]:
+    return dict(_package_versions())
+
+
+@cache
+def _package_versions() -> tuple[tuple[str, str], ...]:
+    """What this process runs on (read once: a sweep worker runs many jobs)."""
     out = {"swarmbox": __version__, "python": platform.python_version()}
     for pkg in ("numpy", "pymunk", "hydra-core", "omegaconf", "pyarrow", "pymavlink"):
         try:
             out[pkg] = metadata.version(pkg)
         except metadata.PackageNotFoundError:
             pass
-    return out
+    return tuple(out.items())
 
 
+@cache
 def _git_sha() -> str | None:
+    """The checkout's commit when this process first asks: the code it imported (a sweep worker
+    would otherwise start a ``git`` process per job)."""
     try:
         out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=_PROJECT_ROOT, capture_output=True,
                              text=True, timeout=5, check=False)

@@ -168,7 +168,7 @@ def test_experiment_preset_sweeps_the_nine_algorithms_over_twenty_datasets():
     params = full.hydra.sweeper.params
     assert sorted(params.algo.split(",")) == sorted(ALGOS)
     assert params.seed == "range(20)"
-    assert full.hydra.launcher._target_.endswith("JoblibLauncher")
+    assert full.hydra.launcher._target_.endswith("SwarmBoxLauncher")
 
 
 @pytest.mark.parametrize("mission, drones, packages", [("delivery16", 16, 101), ("delivery36", 36, 180)])

@@ -103,7 +103,17 @@ def _code(words: pa.Array, word: str) -> int:
 
 def _text(codes: np.ndarray, words: pa.Array) -> pd.api.extensions.ExtensionArray:
     """Pandas text (``str``) of ``words[codes]``, NaN where a code is -1."""
+    if not (codes >= 0).any():   # no word at all (e.g. no drop reason): the missing values directly
+        return pd.array(pa.nulls(len(codes), pa.string()), dtype="str")
     return pd.array(words.take(pa.array(codes, mask=codes < 0)), dtype="str")
+
+
+def _distinct(values: np.ndarray) -> np.ndarray:
+    """``pd.unique(values)`` of a column that comes in long runs of one value, as the loader writes each
+    node's rows together: only the first value of each run is hashed."""
+    if not len(values):
+        return pd.unique(values)
+    return pd.unique(values[np.flatnonzero(np.concatenate([[True], values[1:] != values[:-1]]))])
 
 
 def _known(mask: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -169,7 +179,10 @@ def message_flow(messages: pd.DataFrame, tick_s: float = 0.0) -> pd.DataFrame:
         reason = _spread(keyed, _match(x_distinct, first, keys, -1), -1)
 
     t_send = messages[T].to_numpy(dtype=np.float64)[send]
-    order = np.lexsort((_as_column(dst, d_known), _as_column(msg_id, m_known), t_send))   # NaN last
+    if keyed.all():   # (msg_id, dst) as their one key, ordered alike: the same order from one key less
+        order = np.lexsort((keys, t_send))
+    else:
+        order = np.lexsort((_as_column(dst, d_known), _as_column(msg_id, m_known), t_send))   # NaN last
     # one at a time: each array in log order is freed before the next sorted one is made
     send = send[order]
     msg_id = msg_id[order]
@@ -183,8 +196,8 @@ def message_flow(messages: pd.DataFrame, tick_s: float = 0.0) -> pd.DataFrame:
     src, s_known = _ints(messages["src"], send)
     lat = (t_recv - t_send) * 1e3
     delivered = ~np.isnan(t_recv)
-    nodes = messages["node"].to_numpy()
-    logged = np.sort(pd.unique(nodes[nodes != NET])).astype(np.int64)
+    nodes = _distinct(messages["node"].to_numpy())
+    logged = np.sort(nodes[nodes != NET]).astype(np.int64)
     t_end = float(messages[T].max()) if len(messages) else np.nan
     margin = tick_s if np.isfinite(tick_s) else 0.0
     limit = t_end - _link_max_latency_s(src, dst, s_known & d_known, lat) - margin

@@ -55,15 +55,18 @@ class ExecWindow:
 
 def exec_window(stages: pd.DataFrame, t_last: float) -> ExecWindow | None:
     """The ground's EXECUTION interval, or None when the ground never entered EXECUTION."""
-    ground = stages[stages["node"] == GROUND].sort_values(T)
-    starts = ground.loc[ground["stage"] == EXECUTION, T]
-    if starts.empty:
+    ground = (stages["node"] == GROUND).to_numpy(dtype=bool)
+    t, stage = stages[T].to_numpy(dtype="float64")[ground], stages["stage"].to_numpy()[ground]
+    order = _time_order(t)   # the ground's stage entries by time, as ``sort_values(T)`` orders them
+    t, stage = t[order], stage[order]
+    starts = t[stage == EXECUTION]
+    if not len(starts):
         return None
-    start = float(starts.iloc[0])
-    after = ground[(ground[T] > start) & (ground["stage"] != EXECUTION)]
-    if after.empty:
+    start = float(starts[0])
+    after = t[(t > start) & (stage != EXECUTION)]
+    if not len(after):
         return ExecWindow(start, max(start, t_last), False)
-    return ExecWindow(start, float(after[T].iloc[0]), True)
+    return ExecWindow(start, float(after[0]), True)
 
 
 def within(frame: pd.DataFrame, window: ExecWindow) -> pd.DataFrame:
@@ -75,8 +78,11 @@ _EST = ["pos_n", "pos_e", "pos_d"]
 _VEL = ["vel_n", "vel_e", "vel_d"]
 
 
-def _time_order(t: np.ndarray) -> np.ndarray:
-    """The order ``sort_values(T)`` gives: numpy's quicksort of the known times, unknown (NaN) last."""
+def _time_order(t: np.ndarray) -> np.ndarray | slice:
+    """The order ``sort_values(T)`` gives: numpy's quicksort of the known times, unknown (NaN) last;
+    times already strictly increasing (as logged) keep theirs, as a slice: indexing with it copies nothing."""
+    if (t[1:] > t[:-1]).all():
+        return slice(None)
     known = ~np.isnan(t)
     return np.concatenate([np.flatnonzero(known)[np.argsort(t[known], kind="quicksort")],
                            np.flatnonzero(~known)])
@@ -87,7 +93,8 @@ def _path(t: np.ndarray, true: np.ndarray, est: np.ndarray) -> tuple[float, floa
     if len(pos) < 2:
         return 0.0, 0.0, source
     step = np.diff(pos[_time_order(t)], axis=0)
-    step = step[np.isfinite(step).all(axis=1)]
+    if not np.isfinite(step).all():
+        step = step[np.isfinite(step).all(axis=1)]
     return float(np.hypot(step[:, 0], step[:, 1]).sum()), float(np.linalg.norm(step, axis=1).sum()), source
 
 
@@ -97,7 +104,14 @@ def completion_time(events: pd.DataFrame, drone: int) -> float:
 
 
 def _progress_events(events: pd.DataFrame) -> pd.DataFrame:
-    return events[(events["kind"] == "progress") & events["name"].isin(["exec_complete", "exec_incomplete"])]
+    return events[_is_progress(events)]
+
+
+def _is_progress(events: pd.DataFrame) -> np.ndarray:
+    """Which events are progress events (as arrays: the events frame is small, pandas' text
+    comparisons and filters cost more than the work)."""
+    kind, name = events["kind"].to_numpy(), events["name"].to_numpy()
+    return (kind == "progress") & np.isin(name, ["exec_complete", "exec_incomplete"])
 
 
 def _completion(mine: pd.DataFrame) -> float:
@@ -139,11 +153,11 @@ def drone_workload(state: pd.DataFrame, events: pd.DataFrame, drones: list[int],
     t = t[inside]
     true, est = (np.column_stack([state[c].to_numpy(dtype="float64")[inside] for c in cols])
                  for cols in (_TRUE, _EST))
-    progress = _progress_events(events)
-    p_t, p_name = progress[T].to_numpy(dtype="float64"), progress["name"].to_numpy()
+    progress = _is_progress(events)
+    p_t, p_name = events[T].to_numpy(dtype="float64")[progress], events["name"].to_numpy()[progress]
     rows = []
     for drone, mine, done in zip(drones, _rows_of(state["node"].to_numpy()[inside], drones),
-                                 _rows_of(progress["node"].to_numpy(), drones), strict=True):
+                                 _rows_of(events["node"].to_numpy()[progress], drones), strict=True):
         dist_h, dist_3d, source = _path(t[mine], true[mine], est[mine])
         t_done = _completed_at(p_t[done], p_name[done])
         busy = window.duration

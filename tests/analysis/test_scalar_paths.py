@@ -1,8 +1,14 @@
 """The faster paths of a sweep's per-run analysis equal what they replaced, exactly: the unified times
 for far-apart node ids, the overall network stats, the swarm timeline from one layout, the Theil-Sen
-fit, the categories kept in order, ``reason`` read as a dictionary and the release of read buffers."""
+fit, the categories kept in order, ``reason`` read as a dictionary, the release of read buffers, a small
+run read without the thread pool, the execution window, time orders and progress events from arrays,
+distinct nodes and missing drop reasons in the flow, and the workers' memory settings."""
 
 from __future__ import annotations
+
+import platform
+import subprocess
+import sys
 
 import numpy as np
 import pandas as pd
@@ -10,9 +16,10 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from swarmbox.analysis import load, metrics, network, unify
-from swarmbox.analysis.load import load_run
-from swarmbox.analysis.report import ANALYZED_COLUMNS
+from swarmbox.analysis import flow, load, metrics, network, unify
+from swarmbox.analysis.load import GROUND, load_run
+from swarmbox.analysis.report import ANALYZED_COLUMNS, SCALAR_COLUMNS
+from swarmbox.analysis.unify import T
 from swarmbox.record.broadcast import BROADCAST
 from tests.analysis.test_array_paths import _old_to_unified
 
@@ -133,3 +140,106 @@ def test_read_buffers_released_only_after_a_large_read(formation_run, monkeypatc
     load_run(formation_run, ANALYZED_COLUMNS)
     assert len(calls) == released
 
+
+
+@pytest.mark.parametrize("columns", [None, SCALAR_COLUMNS])
+def test_small_run_read_without_the_pool_loads_the_same(make_run, monkeypatch, columns):
+    """One file after another or by the pool: the same tables, problems (in the same order) and verdict,
+    with a corrupt file and a missing one among them."""
+    path = make_run(skip_files=("drone_1/state",))
+    (path / "logs" / "drone_0" / "events.parquet").write_bytes(b"not parquet")
+    pools = []
+
+    class CountingPool(load.ThreadPoolExecutor):
+        def __init__(self, *args, **kwargs) -> None:
+            pools.append(1)
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(load, "ThreadPoolExecutor", CountingPool)
+    serial = load_run(path, columns)
+    assert not pools   # a few hundred kB: read in this thread
+    monkeypatch.setattr(load, "_POOL_BYTES", 0)
+    pooled = load_run(path, columns)
+    assert pools
+    assert serial.problems == pooled.problems and len(serial.problems) >= 2
+    assert serial.incomplete and pooled.incomplete and serial.nodes == pooled.nodes
+    for name, frame in pooled.tables.items():
+        pd.testing.assert_frame_equal(serial.tables[name], frame, check_exact=True)
+
+
+def _old_exec_window(stages: pd.DataFrame, t_last: float) -> metrics.ExecWindow | None:
+    ground = stages[stages["node"] == GROUND].sort_values(T)
+    starts = ground.loc[ground["stage"] == metrics.EXECUTION, T]
+    if starts.empty:
+        return None
+    start = float(starts.iloc[0])
+    after = ground[(ground[T] > start) & (ground["stage"] != metrics.EXECUTION)]
+    if after.empty:
+        return metrics.ExecWindow(start, max(start, t_last), False)
+    return metrics.ExecWindow(start, float(after[T].iloc[0]), True)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_exec_window_equals_the_sorted_frame(seed):
+    """Stage entries of the ground and of drones, shuffled, with equal and unknown times; some with no
+    EXECUTION, or none after it."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(0, 12))
+    stages = pd.DataFrame({T: rng.integers(0, 6, n) * 0.5, "stage": rng.integers(1, 6, n).astype("int8"),
+                           "node": rng.choice([GROUND, 0, 1], n).astype("int16")})
+    stages.loc[rng.random(n) < 0.15, T] = np.nan
+    for t_last in (1.0, 9.0):
+        got, expected = metrics.exec_window(stages, t_last), _old_exec_window(stages, t_last)
+        assert (got is None and expected is None) or (
+            np.array_equal([got.start, got.end], [expected.start, expected.end], equal_nan=True)
+            and got.complete == expected.complete)
+
+
+def _old_time_order(t: np.ndarray) -> np.ndarray:
+    known = ~np.isnan(t)
+    return np.concatenate([np.flatnonzero(known)[np.argsort(t[known], kind="quicksort")],
+                           np.flatnonzero(~known)])
+
+
+@pytest.mark.parametrize("t", [[], [np.nan], [0.5], [0.0, 0.1, 0.2], [0.0, 0.1, 0.1, 0.2], [0.2, 0.1],
+                               [0.0, np.nan, 0.2], [0.3, 0.1, 0.1, np.nan, 0.0]])
+def test_time_order_of_increasing_times_is_theirs(t):
+    t = np.asarray(t, dtype="float64")
+    np.testing.assert_array_equal(np.arange(len(t))[metrics._time_order(t)], _old_time_order(t))
+
+
+def test_progress_events_from_arrays_equal_the_text_filter():
+    names = ["exec_complete", "exec_incomplete", "exec_completed", "", None, "takeoff"]
+    rng = np.random.default_rng(0)
+    events = pd.DataFrame({"kind": rng.choice(["progress", "marker", "", None], 200),
+                           "name": rng.choice(np.asarray(names, dtype=object), 200)}).astype("str")
+    events.loc[rng.random(200) < 0.1, "kind"] = np.nan
+    expected = (events["kind"] == "progress") & events["name"].isin(["exec_complete", "exec_incomplete"])
+    np.testing.assert_array_equal(metrics._is_progress(events), expected.to_numpy())
+    assert expected.any()
+
+
+@pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="the settings are glibc's")
+def test_worker_keeps_freed_memory_from_one_allocator():
+    """In a fresh process, as a sweep's worker starts: Arrow then allocates from the tuned malloc."""
+    code = ("import pyarrow as pa; from swarmbox.analysis.parallel import _keep_freed_memory; "
+            "_keep_freed_memory(); print(pa.default_memory_pool().backend_name)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "system"
+
+
+@pytest.mark.parametrize("values", [[], [3], [-1, -1, 0, 0, 0, 2, 2, -2], [2, 0, 2, 1, 0, 0, 1],
+                                    [1.0, np.nan, np.nan, 0.0, 1.0]])
+def test_distinct_values_of_runs_equal_pandas_unique(values):
+    """Long runs (as loaded), no runs at all, and unknown values (NaN never equals itself)."""
+    values = np.asarray(values, dtype="float64" if any(np.isnan(v) for v in values) else "int16")
+    np.testing.assert_array_equal(flow._distinct(values), pd.unique(values))
+
+
+def test_text_without_any_word_equals_the_taken_one():
+    words = pa.array(["loss", "queue"])
+    for codes in (np.full(5, -1), np.zeros(0, dtype=np.int64)):
+        got = pd.Series(flow._text(codes, words))
+        expected = pd.Series(pd.array(words.take(pa.array(codes, mask=codes < 0)), dtype="str"))
+        pd.testing.assert_series_equal(got, expected, check_exact=True)
+    assert flow._text(np.array([1, -1]), words).tolist()[0] == "queue"

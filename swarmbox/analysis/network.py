@@ -130,16 +130,9 @@ def overall_stats(flow: pd.DataFrame) -> dict[str, float]:
     names = ["loss_ratio", "latency_ms_mean", "latency_ms_p50", "latency_ms_p95", "latency_ms_max"]
     if flow.empty:
         return dict.fromkeys(names, np.nan)
-    sent, lost = int(flow["counted"].sum()), int(flow["lost"].sum())
-    lat = flow[_LAT][flow["delivered"].to_numpy(dtype=bool)]
-    # :func:`grouped_stats` of one group, bit for bit: the same grouped reductions (a Kahan-summed
-    # mean, pandas' quantile interpolation), under a constant key instead of a copied frame
-    one = lat.groupby(np.zeros(len(lat), dtype=np.int8))
-    p50, p95 = one.quantile([0.5, 0.95]).to_numpy() if len(lat) else (np.nan, np.nan)
-    return {"loss_ratio": lost / sent if sent > 0 else np.nan,
-            "latency_ms_mean": float(one.mean().iloc[0]) if len(lat) else np.nan,
-            "latency_ms_p50": float(p50), "latency_ms_p95": float(p95),
-            "latency_ms_max": float(one.max().iloc[0]) if len(lat) else np.nan}
+    # the columns grouped_stats reads, not a copy of the whole flow, under one group
+    row = grouped_stats(flow[["counted", "delivered", "lost", "nbytes", _LAT]].assign(_all=0), ["_all"], 0.0)
+    return {k: float(row[k].iloc[0]) for k in names}
 
 
 def algebraic_connectivity(nodes: list[int], edges: set[tuple[int, int]]) -> float:

@@ -10,8 +10,9 @@ One :meth:`SimBackend.step` advances the whole fleet with a fixed number of nump
 
 from __future__ import annotations
 
+import logging
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from functools import partial
 from itertools import repeat
 from operator import attrgetter
@@ -21,6 +22,7 @@ import numpy as np
 
 from swarmbox.api import Telemetry
 from swarmbox.hal.safety import SafetyLimits
+from swarmbox.hal.sim import kernel
 from swarmbox.hal.sim.control import CascadedController
 from swarmbox.hal.sim.params import SimParams
 from swarmbox.hal.sim.sensors import GnssEstimator
@@ -30,8 +32,21 @@ from swarmbox.hal.vehicle import VehicleEvent
 
 __all__ = ["SimBackend", "SimParams", "SimVehicle"]
 
+log = logging.getLogger(__name__)
 _new_telemetry = partial(tuple.__new__, Telemetry)   # Telemetry(*fields), all 13 given
 _ARMED, _MODE = attrgetter("armed"), attrgetter("mode")
+
+
+def _load_kernel(mode: str) -> Callable[..., bool] | None:
+    """The compiled kernel; under ``jit: auto`` a failure to load it leaves the run on numpy."""
+    try:
+        return kernel.compiled()
+    except Exception as exc:
+        if mode == "always":
+            raise RuntimeError(f"backend.jit=always needs numba ({exc}); install it or set "
+                               "backend.jit=auto") from exc
+        log.warning("the compiled sim kernel did not load (%s); flying on numpy", exc)
+        return None
 
 
 def _check_homes(homes_ned_m: Sequence[Sequence[float]]) -> np.ndarray:
@@ -95,6 +110,11 @@ class SimBackend:
         self._fix_key: tuple = ()                                 # ... of the lists below
         self._fix_lists: tuple[list, list, list] = ([], [], [])   # fix tuples, seq, ready: change
         #                                                           only with a fix, a crash, est_init_s
+        # the compiled per-step kernel (kernel.py): the same numbers as the numpy code, faster
+        self._kernel = (_load_kernel(p.jit) if p.jit == "always" else kernel.loaded() if p.jit == "auto"
+                        else None)
+        self._jit_wanted = p.jit == "auto" and self._kernel is None and kernel.installed()
+        self._vertical: tuple = ()
         self._supervised: set[int] = set()
         self._supervise_order: list[int] | None = []   # sorted(self._supervised); None: to be sorted again
         self._closed = False
@@ -171,11 +191,17 @@ class SimBackend:
             self._set_dt(dt_s)
         if np.count_nonzero(self._crashed) != self._n_crashed:
             self._apply_crashes()
-        self.ctrl.update(self._est, self._vel, self._accel_scale, dt_s)
-        self._integrate_vertical()
         w = self._world
-        np.multiply(self._acc_xy, self._free_kg, w.cmd_force_xy)
-        np.multiply(self._vel_xy, self._free, w.cmd_vel_xy)
+        if self._kernel is not None:
+            self.ctrl.update_compiled(self._kernel, self._est, self._vel, self._accel_scale, dt_s,
+                                      self._vertical)
+        else:
+            self.ctrl.update(self._est, self._vel, self._accel_scale, dt_s)
+            self._integrate_vertical()
+            np.multiply(self._acc_xy, self._free_kg, w.cmd_force_xy)
+            np.multiply(self._vel_xy, self._free, w.cmd_vel_xy)
+            if self._jit_wanted and kernel.count_numpy_step():
+                self._kernel, self._jit_wanted = _load_kernel(self.params.jit), False
         self._k += 1
         self._event_t_s = t_next = self._t0_s + self._k * dt_s   # no round-off creep over long runs
         w.step(dt_s, self._substeps)
@@ -208,6 +234,9 @@ class SimBackend:
         damping = math.exp(-self.params.drag_n_s_m / self.params.mass_kg * dt_s)   # as pymunk's
         self._dt_s, self._t0_s, self._k = dt_s, self.t_s, 0
         self._vert_k = (np.array(damping), np.array(dt_s))   # 0-d arrays: cheaper operands than floats
+        w = self._world
+        self._vertical = (self._pos_d, self._vel_d, self.airborne, self._free, self._free_kg, self._mass_kg,
+                          damping, dt_s, w.cmd_force_xy, w.cmd_vel_xy)   # the compiled kernel's arguments
         # two drones closing at twice the speed limit must not pass through each other in one step
         need = math.ceil(dt_s * self.params.mpc_xy_vel_max_m_s / self.params.radius_m - 1e-9)
         self._substeps = max(self.params.physics_substeps, need)

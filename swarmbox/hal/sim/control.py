@@ -38,7 +38,7 @@ take it by keyword.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -253,12 +253,7 @@ class CascadedController:
         """
         vsp, tmp, acc, h = self._vsp, self._tmp, self.acc_ned_m_s2, self._h
         an, ae, ad = self._acc_rows
-        scale_key = accel_scale.tobytes()   # the limits change only with the motor health (or the mode)
-        if scale_key != self._limits_key:
-            np.multiply(accel_scale, self._ah_max, out=self._lim_h)
-            np.maximum(self._lim_h, self._tiny, out=self._lim_h)
-            np.multiply(accel_scale, self._neg_up_max, out=self._lim_up)
-            self._limits_key = scale_key
+        self._refresh_limits(accel_scale)
         _saturate_h(an, ae, self._lim_h, h)
         np.maximum(ad, self._lim_up, out=ad)
         np.minimum(ad, self._ramp_down_limit() if self.ramping else self.amax_d_m_s2, out=ad)
@@ -269,6 +264,32 @@ class CascadedController:
         np.multiply(self._vsp_rows[2], h, self._vsp_rows[2])
         vsp *= self._ki_dt_v
         self.integ_m_s2 += vsp
+
+    def _refresh_limits(self, accel_scale: np.ndarray) -> None:
+        scale_key = accel_scale.tobytes()   # the limits change only with the motor health (or the mode)
+        if scale_key != self._limits_key:
+            np.multiply(accel_scale, self._ah_max, out=self._lim_h)
+            np.maximum(self._lim_h, self._tiny, out=self._lim_h)
+            np.multiply(accel_scale, self._neg_up_max, out=self._lim_up)
+            self._limits_key = scale_key
+
+    def update_compiled(self, kernel: Callable[..., bool], pos_ned_m: np.ndarray, vel_ned_m_s: np.ndarray,
+                        accel_scale: np.ndarray, dt_s: float, vertical: tuple) -> None:
+        """:meth:`update`, then the backend's vertical integration (``vertical``: the trailing
+        arguments of ``fleet_jit.fleet_update``), in one call of the compiled ``kernel``
+        (:mod:`swarmbox.hal.sim.kernel`); the same results, bit for bit."""
+        if dt_s != self._dt_s:
+            self._refresh_gains(dt_s)
+        self._refresh_limits(accel_scale)
+        tgt = self._delayed_target() if self._tgt_hist is not None else self.tgt_pos_ned_m
+        ramping = self.ramping
+        self._yaw_busy = kernel(
+            tgt, pos_ned_m, vel_ned_m_s, self.kp, self.vel_ff_ned_m_s, self.acc_ff_ned_m_s2, self.vmax_h_m_s,
+            self.vmin_d_m_s, self.vmax_d_m_s, self.tko_up_m_s,
+            self._ramp_down_limit() if ramping else self.amax_d_m_s2, ramping,
+            self._drag_v, self._kp_v, self._kd_dt_v, self._ki_dt_v, self._arw_gain, self._lim_h, self._lim_up,
+            self.integ_m_s2, self._prev_vel, self.acc_ned_m_s2, self._att_acc, self._att_alpha,
+            self.yaw_rad, self.yaw_tgt_rad, self._yaw_step_f, self._yaw_busy, *vertical)
 
     def _ramp_down_limit(self) -> np.ndarray:
         """Downward acceleration limits with the ramping columns at g: PX4 bounds the thrust, not the

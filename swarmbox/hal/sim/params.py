@@ -12,6 +12,7 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 GRAVITY_M_S2 = 9.80665
+JIT_CHOICES = ("auto", "always", "never")
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,6 +71,9 @@ class SimParams:
     est_gate_m: float = 3.0               # fixes with a larger horizontal innovation are rejected
     est_reset_timeout_s: float = 5.0      # rejecting this long -> reset the estimate to GNSS
     est_init_s: float = 0.5               # estimator start-up time before ready_to_arm
+    # computation (not the model: every choice gives the same numbers, bit for bit)
+    jit: str = "auto"                     # compiled per-tick kernel: auto (long runs, numba installed),
+    #                                       always (numba required), never (numpy only); kernel.py
 
     @classmethod
     def from_kwargs(cls, params: Mapping[str, Any]) -> SimParams:
@@ -84,7 +88,12 @@ class SimParams:
 
     def validate(self) -> None:
         """Raise ValueError naming the first out-of-range field."""
+        if self.jit not in JIT_CHOICES:
+            raise ValueError(f"sim backend parameter 'jit' must be one of {', '.join(JIT_CHOICES)}, "
+                             f"got {self.jit!r}")
         for f in fields(self):
+            if f.name == "jit":
+                continue
             v = getattr(self, f.name)
             if not math.isfinite(v) or v < 0:
                 raise ValueError(f"sim backend parameter {f.name!r} must be finite and >= 0, got {v!r}")

@@ -1,0 +1,58 @@
+"""The sim backend's per-tick arithmetic as one compiled function (numba), for long runs.
+
+One :meth:`SimBackend.step` runs about sixty numpy calls before pymunk's: the cascaded controller
+(:mod:`swarmbox.hal.sim.control`) and the vertical integration (``SimBackend._integrate_vertical``).
+At a few drones each call costs far more than its arithmetic (a five-drone delivery run spends a
+quarter of its tick there). ``fleet_jit.fleet_update`` does the same work in one loop over the drones,
+compiled by numba on first use and cached on disk.
+
+The numpy code stays the reference: this loop repeats its operations one for one and in the same
+order (``np.maximum``/``np.minimum`` as their NaN-propagating comparisons, ``hypot`` from the C
+library, Python's float ``%`` as numpy's), so both give bit-identical states;
+``tests/hal/sim/test_kernel.py`` flies every mode both ways and compares every array. Which path a
+run takes is ``backend.jit`` (:class:`~swarmbox.hal.sim.params.SimParams`): under the default
+``auto`` the kernel takes over once the process has flown ``JIT_AFTER_STEPS`` steps on numpy (numba
+installed), and from the first step of every later run in that process.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from collections.abc import Callable
+
+#: "auto": the kernel is loaded once this process has flown this many fleet steps on numpy (about
+#: 250 simulated seconds at 40 Hz, over one run or several). Loading costs about a quarter of a second
+#: (importing numba, reading the compiled code from its cache) and the kernel saves 15-40 us a step,
+#: so a sweep worker pays it once for every run after; short runs never load it.
+JIT_AFTER_STEPS = 10_000
+
+_kernel: Callable[..., bool] | None = None
+_numpy_steps = 0
+
+
+def installed() -> bool:
+    """Whether numba is installed (found, not imported: importing it takes a quarter of a second)."""
+    return importlib.util.find_spec("numba") is not None
+
+
+def loaded() -> Callable[..., bool] | None:
+    """The kernel if this process has loaded it already, else None."""
+    return _kernel
+
+
+def compiled() -> Callable[..., bool]:
+    """``fleet_jit.fleet_update``, compiled on the first call ever and loaded from numba's on-disk
+    cache after that. Raises ImportError when numba is missing."""
+    global _kernel
+    if _kernel is None:
+        from swarmbox.hal.sim.fleet_jit import fleet_update  # heavy: only when a run asks for it
+
+        _kernel = fleet_update
+    return _kernel
+
+
+def count_numpy_step() -> bool:
+    """Count one fleet step flown on numpy; True once the process has flown ``JIT_AFTER_STEPS``."""
+    global _numpy_steps
+    _numpy_steps += 1
+    return _numpy_steps >= JIT_AFTER_STEPS

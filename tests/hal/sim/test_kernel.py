@@ -1,0 +1,110 @@
+"""The compiled per-step kernel (``swarmbox.hal.sim.kernel``) flies exactly what the numpy code flies.
+
+Every state array of the fleet is compared bit for bit after every step, through takeoff, position,
+velocity and acceleration setpoints, yaw turns, motor loss, LAND / RTL / HOLD, a crash, and PX4-like
+parameters (takeoff ramp, attitude lag, no drag feed-forward, delayed offboard targets); a whole run
+that switches to the kernel half-way writes the same logs as one that never does.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from swarmbox.api import Setpoint
+from swarmbox.hal.sim import kernel
+from swarmbox.hal.sim.backend import SimBackend
+
+pytest.importorskip("numba")
+
+TICK_S = 0.025
+PX4_LIKE = {"mc_roll_p": 4.0, "vel_drag_ff": 0.0, "offboard_delay_s": 0.1, "mpc_tko_ramp_t_s": 3.0,
+            "land_at_stop_point": True, "acc_hor_max_offboard": False}
+
+
+def _fly(n: int, jit: str, **params) -> np.ndarray:
+    """Every state array after each of 1,800 steps of a scripted flight through every mode."""
+    homes = [(3.0 * k, 1.5 * (k % 3), 0.0) for k in range(n)]
+    b = SimBackend(homes_ned_m=homes, tick_s=TICK_S, rng=np.random.default_rng(7), jit=jit, **params)
+    assert (b._kernel is not None) == (jit == "always")
+    vs = b.vehicles
+    rows = []
+    for k in range(1800):
+        if k == 30:
+            for v in vs:
+                v.arm()
+                v.takeoff(4.0 + v.drone_id % 4)
+        elif k == 300:
+            for v in vs:   # a long leg: saturated speed and acceleration, a yaw turn past +-pi
+                v.setpoint(Setpoint.position(40.0 + 2 * v.drone_id, -25.0, -8.0,
+                                             yaw_rad=2.9 - 0.1 * v.drone_id))
+        elif k == 700:
+            for v in vs[0::3]:
+                v.setpoint(Setpoint.velocity(3.0, -4.0, -0.5, yaw_rad=-3.0))
+            for v in vs[1::3]:
+                v.setpoint(Setpoint.acceleration(1.0, -2.0, 0.3))
+            b.accel_scale = np.linspace(0.4, 1.0, n)   # motor loss
+            b.gnss_offset_ned_m = np.outer(np.arange(n) % 2, [0.5, 0.0, 0.0])
+        elif k == 1100:
+            for v in vs[0::3]:
+                v.land()
+            for v in vs[1::3]:
+                v.return_to_launch()
+            for v in vs[2::3]:
+                v.hold()
+        elif k == 1600:
+            b.crashed = np.arange(n) == n - 1
+        b.step(TICK_S)
+        rows.append(np.concatenate([b._kin.ravel(), b.airborne, b._free_kg, b._world.cmd_vel_xy.ravel(),
+                                    b.ctrl.acc_ned_m_s2.ravel(), b.ctrl.integ_m_s2.ravel(),
+                                    b.ctrl._att_acc.ravel(), b.ctrl.yaw_rad, [b.ctrl._yaw_busy]]))
+    return np.array(rows)
+
+
+@pytest.mark.parametrize("params", [{}, PX4_LIKE], ids=["sim", "px4_like"])
+@pytest.mark.parametrize("n", [5, 40])   # 40: past the controller's small-fleet list path (_turn)
+def test_kernel_equals_numpy_bit_for_bit(n, params):
+    ref, fast = _fly(n, "never", **params), _fly(n, "always", **params)
+    assert np.isfinite(ref).all()
+    diff = np.flatnonzero((ref != fast).any(axis=1))
+    assert not len(diff), f"first differing step: {diff[0]}"
+
+
+def test_auto_switches_half_way_and_writes_the_same_logs(run, monkeypatch):
+    monkeypatch.setattr(kernel, "JIT_AFTER_STEPS", 300)
+    monkeypatch.setattr(kernel, "_numpy_steps", 0)
+    monkeypatch.setattr(kernel, "_kernel", None)
+    never, d_never = run("backend.jit=never", "seed=2")
+    assert kernel.loaded() is None
+    auto, d_auto = run("backend.jit=auto", "seed=2")
+    assert kernel.loaded() is not None and auto["ticks"] > 300   # switched during the run
+    files = sorted(p.relative_to(d_never) for p in (d_never / "logs").rglob("*.parquet"))
+    assert files == sorted(p.relative_to(d_auto) for p in (d_auto / "logs").rglob("*.parquet"))
+    for f in files:
+        pd.testing.assert_frame_equal(pd.read_parquet(d_never / f), pd.read_parquet(d_auto / f), obj=str(f))
+    # a later backend in the same process starts on the kernel
+    b = SimBackend(homes_ned_m=[(0.0, 0.0, 0.0)], tick_s=TICK_S, rng=np.random.default_rng(0))
+    assert b._kernel is kernel.loaded()
+
+
+def test_bad_jit_value_is_refused_with_its_name():
+    with pytest.raises(ValueError, match="'jit' must be one of auto, always, never, got 'fast'"):
+        SimBackend(homes_ned_m=[(0.0, 0.0, 0.0)], tick_s=TICK_S, rng=np.random.default_rng(0), jit="fast")
+
+
+def test_without_numba_always_fails_clearly_and_auto_stays_on_numpy(monkeypatch, tmp_path: Path):
+    def missing() -> None:
+        raise ImportError("No module named 'numba'")
+
+    monkeypatch.setattr(kernel, "compiled", missing)
+    monkeypatch.setattr(kernel, "_kernel", None)
+    with pytest.raises(RuntimeError, match="backend.jit=always needs numba"):
+        SimBackend(homes_ned_m=[(0.0, 0.0, 0.0)], tick_s=TICK_S, rng=np.random.default_rng(0), jit="always")
+    monkeypatch.setattr(kernel, "installed", lambda: False)
+    b = SimBackend(homes_ned_m=[(0.0, 0.0, 0.0)], tick_s=TICK_S, rng=np.random.default_rng(0))
+    monkeypatch.setattr(kernel, "_numpy_steps", kernel.JIT_AFTER_STEPS)
+    b.step(TICK_S)
+    assert b._kernel is None and not b._jit_wanted

@@ -12,10 +12,11 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from functools import partial
 from itertools import repeat
 from operator import attrgetter
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -37,7 +38,7 @@ _new_telemetry = partial(tuple.__new__, Telemetry)   # Telemetry(*fields), all 1
 _ARMED, _MODE = attrgetter("armed"), attrgetter("mode")
 
 
-def _load_kernel(mode: str) -> Callable[..., bool] | None:
+def _load_kernel(mode: str) -> ModuleType | None:
     """The compiled kernel; under ``jit: auto`` a failure to load it leaves the run on numpy."""
     try:
         return kernel.compiled()
@@ -191,9 +192,9 @@ class SimBackend:
             self._set_dt(dt_s)
         if np.count_nonzero(self._crashed) != self._n_crashed:
             self._apply_crashes()
-        w = self._world
-        if self._kernel is not None:
-            self.ctrl.update_compiled(self._kernel, self._est, self._vel, self._accel_scale, dt_s,
+        w, jit = self._world, self._kernel
+        if jit is not None:
+            self.ctrl.update_compiled(jit.fleet_update, self._est, self._vel, self._accel_scale, dt_s,
                                       self._vertical)
         else:
             self.ctrl.update(self._est, self._vel, self._accel_scale, dt_s)
@@ -207,14 +208,19 @@ class SimBackend:
         w.step(dt_s, self._substeps)
         w.read(self._pos, self._vel)
         self.t_s = t_next
-        if self._gnss.due(self.t_s):
-            self._gnss_fix()
-        np.add(self._pos, self._gnss.err_ned_m, self._est)
-        np.multiply(self.airborne, self._vert_k[1], self._tmp)
-        self._air_s += self._tmp
+        g = self._gnss
+        if g.due(self.t_s):
+            self._gnss_fix(jit)
+        if jit is not None:   # with the battery fractions, which are otherwise computed on demand
+            jit.after_step(self._pos, g.err_ned_m, self._est, self.airborne, dt_s, self._air_s,
+                           self.params.battery_endurance_s, self._battery)
+        else:
+            np.add(self._pos, g.err_ned_m, self._est)
+            np.multiply(self.airborne, self._vert_k[1], self._tmp)
+            self._air_s += self._tmp
         if self._supervised:
             self._supervise()
-        self._tel, self._battery_ok = None, False
+        self._tel, self._battery_ok = None, jit is not None
 
     def drain_events(self) -> list[VehicleEvent]:
         out, self._events = self._events, []
@@ -272,9 +278,9 @@ class SimBackend:
         """Whether vehicle ``i`` is resting on the ground."""
         return bool(self.airborne[i] == 0.0)
 
-    def _gnss_fix(self) -> None:
+    def _gnss_fix(self, jit: ModuleType | None) -> None:
         self._n_fixes += 1
-        for i, count, jump_m in self._gnss.fix(self.t_s, self._pos):
+        for i, count, jump_m in self._gnss.fix(self.t_s, self._pos, jit):
             self.emit(i, "estimator", "position_reset", {"count": count, "jump_m": jump_m})
 
     def _supervise(self) -> None:

@@ -106,3 +106,43 @@ def _saturate_h(x_n: float, x_e: float, vmax: float) -> tuple[float, float]:
 def _wrap(angle_rad: float) -> float:
     """To [-pi, pi), as ``control._wrap``."""
     return (angle_rad + _PI) % _TWO_PI - _PI
+
+
+@njit(cache=True, error_model="numpy")
+def gnss_correct(noise: np.ndarray, sigma: np.ndarray, noise_scale: np.ndarray, offset: np.ndarray,
+                 err: np.ndarray, innov: np.ndarray, gate: float, gain: float, available: np.ndarray,
+                 ok: np.ndarray, last_accept_s: np.ndarray, t_s: float, true_pos: np.ndarray,
+                 fix_ned: np.ndarray, seq: np.ndarray) -> int:
+    """``GnssEstimator.fix`` after the noise draw (``noise`` holds standard normals): scale and offset
+    the noise, gate and apply the corrections, record the fixes; ``ok`` gets the accepted receivers.
+    Returns how many available receivers were rejected."""
+    rejected = 0
+    for i in range(err.shape[1]):
+        for a in range(3):
+            noise[a, i] = noise[a, i] * sigma[a, 0] * noise_scale[i] + offset[i, a]
+            innov[a, i] = noise[a, i] - err[a, i]
+        good = available[i] and math.hypot(innov[0, i], innov[1, i]) <= gate
+        ok[i] = good
+        k = gain * (1.0 if good else 0.0)
+        for a in range(3):
+            err[a, i] += innov[a, i] * k
+        if good:
+            last_accept_s[i] = t_s
+        if available[i]:
+            for a in range(3):
+                fix_ned[a, i] = true_pos[a, i] + noise[a, i]
+            seq[i] += 1
+            if not good:
+                rejected += 1
+    return rejected
+
+
+@njit(cache=True, error_model="numpy")
+def after_step(pos: np.ndarray, err: np.ndarray, est: np.ndarray, airborne: np.ndarray, dt: float,
+               air_s: np.ndarray, endurance_s: float, battery: np.ndarray) -> None:
+    """The end of ``SimBackend.step``: estimates, airborne time and battery fractions."""
+    for i in range(est.shape[1]):
+        for a in range(3):
+            est[a, i] = pos[a, i] + err[a, i]
+        air_s[i] += airborne[i] * dt
+        battery[i] = _max(1.0 - air_s[i] / endurance_s, 0.0)

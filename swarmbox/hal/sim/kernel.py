@@ -4,7 +4,8 @@ One :meth:`SimBackend.step` runs about sixty numpy calls before pymunk's: the ca
 (:mod:`swarmbox.hal.sim.control`) and the vertical integration (``SimBackend._integrate_vertical``).
 At a few drones each call costs far more than its arithmetic (a five-drone delivery run spends a
 quarter of its tick there). ``fleet_jit.fleet_update`` does the same work in one loop over the drones,
-compiled by numba on first use and cached on disk.
+compiled by numba on first use and cached on disk; ``gnss_correct`` and ``after_step`` do the same for
+the GNSS fixes (after the noise draw, which stays numpy's) and the end of the step.
 
 The numpy code stays the reference: this loop repeats its operations one for one and in the same
 order (``np.maximum``/``np.minimum`` as their NaN-propagating comparisons, ``hypot`` from the C
@@ -18,7 +19,7 @@ installed), and from the first step of every later run in that process.
 from __future__ import annotations
 
 import importlib.util
-from collections.abc import Callable
+from types import ModuleType
 
 #: "auto": the kernel is loaded once this process has flown this many fleet steps on numpy (about
 #: 250 simulated seconds at 40 Hz, over one run or several). Loading costs about a quarter of a second
@@ -26,7 +27,7 @@ from collections.abc import Callable
 #: so a sweep worker pays it once for every run after; short runs never load it.
 JIT_AFTER_STEPS = 10_000
 
-_kernel: Callable[..., bool] | None = None
+_kernel: ModuleType | None = None
 _numpy_steps = 0
 
 
@@ -35,19 +36,20 @@ def installed() -> bool:
     return importlib.util.find_spec("numba") is not None
 
 
-def loaded() -> Callable[..., bool] | None:
+def loaded() -> ModuleType | None:
     """The kernel if this process has loaded it already, else None."""
     return _kernel
 
 
-def compiled() -> Callable[..., bool]:
-    """``fleet_jit.fleet_update``, compiled on the first call ever and loaded from numba's on-disk
-    cache after that. Raises ImportError when numba is missing."""
+def compiled() -> ModuleType:
+    """The kernel module (``fleet_jit``: ``fleet_update``, ``gnss_correct``, ``after_step``), compiled
+    on the first call ever and loaded from numba's on-disk cache after that. Raises ImportError when
+    numba is missing."""
     global _kernel
     if _kernel is None:
-        from swarmbox.hal.sim.fleet_jit import fleet_update  # heavy: only when a run asks for it
+        from swarmbox.hal.sim import fleet_jit  # heavy: only when a run asks for it
 
-        _kernel = fleet_update
+        _kernel = fleet_jit
     return _kernel
 
 

@@ -19,6 +19,8 @@ with the defaults drifts faster than about 1.6 m/s outrun the 3 m gate.
 
 from __future__ import annotations
 
+from types import ModuleType
+
 import numpy as np
 
 from swarmbox.hal.sim.params import SimParams
@@ -49,16 +51,25 @@ class GnssEstimator:
         self._last_accept_s = np.zeros(n)
         self._next_fix_s = self.period_s
         self._noise, self._innov, self._fix = np.zeros((3, n)), np.zeros((3, n)), np.zeros((3, n))
+        self._ok = np.zeros(n, dtype=bool)        # accepted by the last fix (the compiled path's)
 
     def due(self, t_s: float) -> bool:
         """True when a fix is due at ``t_s`` (call :meth:`fix` then)."""
         return t_s >= self._next_fix_s - 1e-9
 
-    def fix(self, t_s: float, true_pos_ned_m: np.ndarray) -> list[Reset]:
-        """Take a fix for every available receiver and correct the estimates; returns the resets."""
+    def fix(self, t_s: float, true_pos_ned_m: np.ndarray, jit: ModuleType | None = None) -> list[Reset]:
+        """Take a fix for every available receiver and correct the estimates; returns the resets.
+
+        ``jit``: the compiled kernel module (:mod:`swarmbox.hal.sim.kernel`), which computes the same."""
         self._next_fix_s = max(self._next_fix_s + self.period_s, t_s + 0.5 * self.period_s)
         err_fix, innov, avail = self._noise, self._innov, self.available
         self._rng.standard_normal(out=err_fix)      # drawn for all: streams stay aligned
+        if jit is not None:
+            rejected = jit.gnss_correct(err_fix, self._sigma, self.noise_scale, self.offset_ned_m,
+                                        self.err_ned_m, innov, self.p.est_gate_m, self.p.est_gain, avail,
+                                        self._ok, self._last_accept_s, t_s, true_pos_ned_m, self.fix_ned_m,
+                                        self.seq)
+            return self._resets(t_s, avail & ~self._ok) if rejected else []
         err_fix *= self._sigma
         err_fix *= self.noise_scale
         err_fix += self.offset_ned_m.T              # now fix − truth

@@ -5,7 +5,9 @@ altitude is integrated alongside in numpy with the same integrator and drag, wit
 ``d = 0``.
 Each vehicle flies on its *estimate* (:mod:`swarmbox.hal.sim.sensors`) through a cascaded controller
 (:mod:`swarmbox.hal.sim.control`); commands and modes are :class:`~swarmbox.hal.sim.vehicle.SimVehicle`.
-One :meth:`SimBackend.step` advances the whole fleet with a fixed number of numpy and pymunk calls.
+One :meth:`SimBackend.step` advances the whole fleet with a fixed number of numpy and pymunk calls;
+on long runs the numpy arithmetic is replaced by three calls of a compiled kernel that computes the
+same numbers bit for bit (:mod:`swarmbox.hal.sim.kernel`, ``backend.jit``).
 """
 
 from __future__ import annotations

@@ -106,13 +106,15 @@ def home_of(args: argparse.Namespace) -> GeoFrame:
     return GeoFrame(lat, lon, args.origin_alt)
 
 
-def sim_params_of(items: Sequence[str]) -> dict[str, float]:
-    out = {}
+def sim_params_of(items: Sequence[str]) -> dict[str, float | str]:
+    """The vehicle's sim parameters. A paced one-vehicle process gains nothing from the compiled
+    kernel and must not stall for its loading mid-flight, so ``jit`` is ``never`` unless given."""
+    out: dict[str, float | str] = {"jit": "never"}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep:
             raise ValueError(f"--sim-param expects KEY=VALUE, got {item!r}")
-        out[key] = float(value)
+        out[key] = value if key == "jit" else float(value)
     SimParams.from_kwargs(out)
     return out
 

@@ -114,3 +114,13 @@ def test_without_numba_always_fails_clearly_and_auto_stays_on_numpy(monkeypatch,
     monkeypatch.setattr(kernel, "_numpy_steps", kernel.JIT_AFTER_STEPS)
     b.step(TICK_S)
     assert b._kernel is None and not b._jit_wanted
+
+
+def test_mavsim_vehicles_stay_on_numpy_unless_asked():
+    """A paced mavsim vehicle must not stall mid-flight to load the kernel."""
+    from swarmbox.hal.mavsim.process import sim_params_of
+
+    assert sim_params_of(["mass_kg=2"]) == {"jit": "never", "mass_kg": 2.0}
+    assert sim_params_of(["jit=always"])["jit"] == "always"
+    with pytest.raises(ValueError, match="'jit' must be one of"):
+        sim_params_of(["jit=fast"])

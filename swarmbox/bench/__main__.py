@@ -13,6 +13,7 @@ of the two.
 
     python -m swarmbox.bench                       # 5, 36, 200, 1000 drones, 2 rounds
     python -m swarmbox.bench --sizes 5 36 --rounds 3 --json results/bench.json
+    python -m swarmbox.bench --jit always          # SwarmBox on the sim backend's compiled kernel
 """
 
 from __future__ import annotations
@@ -37,14 +38,16 @@ def _run(cmd: list[str]) -> dict:
     return json.loads(lines[-1])
 
 
-def measure(sizes: list[int], rounds: int, floor: Path, floor_s: float, hover_s: float) -> list[dict]:
+def measure(sizes: list[int], rounds: int, floor: Path, floor_s: float, hover_s: float,
+            jit: str = "auto") -> list[dict]:
     """Every measurement, interleaved: per round, per size, bare loop and SwarmBox back to back."""
     env_python = sys.executable
     rows = []
     for r in range(rounds):
         for n in sizes:
             pair = [[env_python, str(floor), str(n), str(floor_s)],
-                    [env_python, "-m", "swarmbox.bench.hover", str(n), "--hover-s", str(hover_s)]]
+                    [env_python, "-m", "swarmbox.bench.hover", str(n), "--hover-s", str(hover_s),
+                     "--jit", jit]]
             if (r + sizes.index(n)) % 2:
                 pair.reverse()
             for cmd in pair:
@@ -97,6 +100,9 @@ def main(argv: list[str] | None = None) -> int:
                    help=f"the bare loop script ({DEFAULT_FLOOR})")
     p.add_argument("--floor-s", type=float, default=10.0, help="simulated seconds of the bare loop (10)")
     p.add_argument("--hover-s", type=float, default=10.0, help="SwarmBox hover time at altitude, s (10)")
+    p.add_argument("--jit", choices=["auto", "always", "never"], default="auto",
+                   help="backend.jit of the SwarmBox runs (always: the compiled kernel of long runs, loaded "
+                        "before the loop; auto: these short runs stay on numpy)")
     p.add_argument("--json", type=Path, help="also write every measurement and the table here")
     args = p.parse_args(argv)
     if not args.floor.is_file():
@@ -106,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
         print("error: --rounds and every size must be >= 1", file=sys.stderr)
         return 2
     before = os.getloadavg()[0]
-    rows = measure(args.sizes, args.rounds, args.floor, args.floor_s, args.hover_s)
+    rows = measure(args.sizes, args.rounds, args.floor, args.floor_s, args.hover_s, args.jit)
     summary = table(rows, args.sizes)
     after = os.getloadavg()[0]
     print(markdown(summary, (before, after)))

@@ -14,6 +14,7 @@ import shutil
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 SPACING_M = 5.0
@@ -25,7 +26,7 @@ def grid(n: int, spacing_m: float = SPACING_M) -> dict[int, list[float]]:
     return {i: [spacing_m * (i % side), spacing_m * (i // side)] for i in range(n)}
 
 
-def compose(n: int, hover_s: float, extra: list[str] = ()):
+def compose(n: int, hover_s: float, extra: Sequence[str] = ()):
     """The run config of an N-drone hover, composed like the command line does."""
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
@@ -50,11 +51,12 @@ def compose(n: int, hover_s: float, extra: list[str] = ()):
     return cfg, choices, overrides
 
 
-def hover_run(n: int, hover_s: float, run_dir: Path) -> dict:
-    """Execute the run into ``run_dir``; returns the manifest plus the whole call's wall time."""
+def hover_run(n: int, hover_s: float, run_dir: Path, extra: Sequence[str] = ()) -> dict:
+    """Execute the run into ``run_dir`` (``extra``: more overrides); returns the manifest plus the
+    whole call's wall time."""
     from swarmbox.run.runner import execute
 
-    cfg, choices, overrides = compose(n, hover_s)
+    cfg, choices, overrides = compose(n, hover_s, list(extra))
     cpu: dict[str, float] = {}
 
     def measure_loop(swarm) -> None:
@@ -83,12 +85,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("n", type=int, help="number of drones")
     p.add_argument("--hover-s", type=float, default=10.0, help="time at altitude, s (10)")
     p.add_argument("--out", type=Path, help="keep the run here (default: a temporary directory)")
+    p.add_argument("--jit", choices=["auto", "always", "never"], default="auto",
+                   help="backend.jit: the sim backend's compiled kernel (auto: as a run of that length)")
     args = p.parse_args(argv)
     if args.n < 1:
         p.error(f"n must be >= 1, got {args.n}")
     tmp = None if args.out else Path(tempfile.mkdtemp(prefix="swarmbox-bench-"))
     try:
-        m = hover_run(args.n, args.hover_s, args.out or tmp / "run")
+        m = hover_run(args.n, args.hover_s, args.out or tmp / "run", [f"backend.jit={args.jit}"])
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)

@@ -16,15 +16,17 @@ from tests.conftest import compose_config
 OVERRIDES = ["+experiment=rq4_delivery", "algo=delivery_distance_dynamic", "seed=0", "run.progress=false"]
 
 
-def one_run(tmp_path_factory) -> tuple[dict, object]:
-    cfg, choices = compose_config(OVERRIDES)
+def one_run(tmp_path_factory, jit: str) -> tuple[dict, object]:
+    overrides = [*OVERRIDES, f"backend.jit={jit}"]
+    cfg, choices = compose_config(overrides)
     run_dir = tmp_path_factory.mktemp("bench_delivery")
-    return execute(cfg, run_dir, choices, OVERRIDES), run_dir
+    return execute(cfg, run_dir, choices, overrides), run_dir
 
 
 @pytest.mark.slow
-def test_full_paper_delivery_run(benchmark, tmp_path_factory):
-    manifest, run_dir = benchmark.pedantic(one_run, args=(tmp_path_factory,), rounds=1, iterations=1)
+@pytest.mark.parametrize("jit", ["never", "always"])   # numpy / the compiled kernel (loaded before the loop)
+def test_full_paper_delivery_run(benchmark, tmp_path_factory, jit):
+    manifest, run_dir = benchmark.pedantic(one_run, args=(tmp_path_factory, jit), rounds=1, iterations=1)
     assert manifest["status"] == "ok", manifest["reason"]
     events = pd.read_parquet(run_dir / "logs" / "ground" / "events.parquet")
     delivered = [json.loads(d)["package"] for d in events.loc[events["name"] == "delivered", "data"]]

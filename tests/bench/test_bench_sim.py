@@ -21,11 +21,12 @@ TICK_S = 0.025
 
 
 @cache
-def airborne_fleet(n: int, spacing_m: float = 3.0, alt_m: float = 5.0) -> SimBackend:
-    """``n`` drones on a grid, hovering at ``alt_m`` under OFFBOARD position setpoints."""
+def airborne_fleet(n: int, jit: str = "never", spacing_m: float = 3.0, alt_m: float = 5.0) -> SimBackend:
+    """``n`` drones on a grid, hovering at ``alt_m`` under OFFBOARD position setpoints; ``jit``: the
+    backend's (never: numpy throughout, however many steps the benchmark takes; always: the kernel)."""
     side = math.ceil(math.sqrt(n))
     homes = [(spacing_m * (k // side), spacing_m * (k % side), 0.0) for k in range(n)]
-    b = SimBackend(homes_ned_m=homes, tick_s=TICK_S, rng=np.random.default_rng(0))
+    b = SimBackend(homes_ned_m=homes, tick_s=TICK_S, rng=np.random.default_rng(0), jit=jit)
     for _ in range(round(1.0 / TICK_S)):
         b.step(TICK_S)
     for v in b.vehicles:
@@ -41,9 +42,10 @@ def airborne_fleet(n: int, spacing_m: float = 3.0, alt_m: float = 5.0) -> SimBac
     return b
 
 
+@pytest.mark.parametrize("jit", ["never", "always"])
 @pytest.mark.parametrize("n", [5, 36, 100, 200])
-def test_bench_sim_step(benchmark, n):
-    b = airborne_fleet(n)
+def test_bench_sim_step(benchmark, n, jit):
+    b = airborne_fleet(n, jit)
     benchmark(b.step, TICK_S)
     if benchmark.stats is not None:
         mean_s = benchmark.stats.stats.mean
@@ -55,11 +57,12 @@ def test_bench_sim_step(benchmark, n):
     assert np.allclose(b.true_pos_ned_m[:, 2], -5.0, atol=0.5)
 
 
+@pytest.mark.parametrize("jit", ["never", "always"])
 @pytest.mark.parametrize("n", [5, 36])
-def test_bench_sim_tick(benchmark, n):
+def test_bench_sim_tick(benchmark, n, jit):
     """What the tick loop asks of the backend per tick: every vehicle's telemetry, the state row's
     columns (written into buffers, as the recorder's), one step."""
-    b = airborne_fleet(n)
+    b = airborne_fleet(n, jit)
     values, landed = np.empty((14, n)), np.empty(n, dtype=bool)
 
     def tick() -> None:

@@ -10,6 +10,9 @@ as one that never does.
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -175,3 +178,14 @@ def test_kernel_equals_numpy_for_any_command_sequence(n, px4_like, commands):
                      (ref.ctrl.yaw_rad, fast.ctrl.yaw_rad), (ref._gnss.err_ned_m, fast._gnss.err_ned_m),
                      (ref.battery_frac(), fast.battery_frac())):
             assert np.array_equal(a, c), f"step {k}"
+
+
+@pytest.mark.slow
+def test_bench_hover_cli_flies_on_the_kernel_when_asked():
+    """``python -m swarmbox.bench.hover N --jit always`` (what ``python -m swarmbox.bench --jit always``
+    runs), a real subprocess."""
+    cmd = [sys.executable, "-m", "swarmbox.bench.hover", "4", "--hover-s", "1", "--jit", "always"]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=120, check=False)
+    assert out.returncode == 0, out.stderr[-2000:]
+    row = json.loads(out.stdout.strip().splitlines()[-1])
+    assert row["status"] == "ok" and row["n"] == 4 and row["agent_steps_per_s"] > 0

@@ -123,6 +123,8 @@ class SimBackend:
         self._closed = False
         self.vehicles = [SimVehicle(self, i, (h[0], h[1], h[2]), ctrl=self.ctrl, params=p, limits=limits)
                          for i, h in enumerate(homes.tolist())]
+        if self._kernel is not None:
+            self._warm(self._kernel)
 
     def _init_state(self, homes: np.ndarray) -> None:
         """Truth, estimate and scratch arrays; every vehicle on the ground at its home."""
@@ -214,8 +216,7 @@ class SimBackend:
         if g.due(self.t_s):
             self._gnss_fix(jit)
         if jit is not None:   # with the battery fractions, which are otherwise computed on demand
-            jit.after_step(self._pos, g.err_ned_m, self._est, self.airborne, dt_s, self._air_s,
-                           self.params.battery_endurance_s, self._battery)
+            jit.after_step(*self._after_args(dt_s))
         else:
             np.add(self._pos, g.err_ned_m, self._est)
             np.multiply(self.airborne, self._vert_k[1], self._tmp)
@@ -223,6 +224,29 @@ class SimBackend:
         if self._supervised:
             self._supervise()
         self._tel, self._battery_ok = None, jit is not None
+
+    def _after_args(self, dt_s: float) -> tuple:
+        return (self._pos, self._gnss.err_ned_m, self._est, self.airborne, dt_s, self._air_s,
+                self.params.battery_endurance_s, self._battery)
+
+    def _vertical_args(self, dt_s: float) -> tuple:
+        damping = math.exp(-self.params.drag_n_s_m / self.params.mass_kg * dt_s)   # as pymunk's
+        w = self._world
+        return (self._pos_d, self._vel_d, self.airborne, self._free, self._free_kg, self._mass_kg, damping,
+                dt_s, w.cmd_force_xy, w.cmd_vel_xy)
+
+    def _warm(self, jit: ModuleType) -> None:
+        """Have numba load the kernel's code for this fleet's argument types now: it would otherwise do
+        it on the first call, inside the tick loop (a quarter of a second; the first time ever, a compile)."""
+        from numba import typeof
+
+        c = self.ctrl
+        update = c.kernel_args(c.tgt_pos_ned_m, self._est, self._vel, c.amax_d_m_s2) + \
+            self._vertical_args(self.tick_s)
+        for func, args in ((jit.fleet_update, update),
+                           (jit.gnss_correct, self._gnss.kernel_args(self.t_s, self._pos)),
+                           (jit.after_step, self._after_args(self.tick_s))):
+            func.compile(tuple(map(typeof, args)))
 
     def drain_events(self) -> list[VehicleEvent]:
         out, self._events = self._events, []
@@ -242,9 +266,7 @@ class SimBackend:
         damping = math.exp(-self.params.drag_n_s_m / self.params.mass_kg * dt_s)   # as pymunk's
         self._dt_s, self._t0_s, self._k = dt_s, self.t_s, 0
         self._vert_k = (np.array(damping), np.array(dt_s))   # 0-d arrays: cheaper operands than floats
-        w = self._world
-        self._vertical = (self._pos_d, self._vel_d, self.airborne, self._free, self._free_kg, self._mass_kg,
-                          damping, dt_s, w.cmd_force_xy, w.cmd_vel_xy)   # the compiled kernel's arguments
+        self._vertical = self._vertical_args(dt_s)           # the compiled kernel's
         # two drones closing at twice the speed limit must not pass through each other in one step
         need = math.ceil(dt_s * self.params.mpc_xy_vel_max_m_s / self.params.radius_m - 1e-9)
         self._substeps = max(self.params.physics_substeps, need)

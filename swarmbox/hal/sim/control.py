@@ -282,14 +282,17 @@ class CascadedController:
             self._refresh_gains(dt_s)
         self._refresh_limits(accel_scale)
         tgt = self._delayed_target() if self._tgt_hist is not None else self.tgt_pos_ned_m
-        ramping = self.ramping
-        self._yaw_busy = kernel(
-            tgt, pos_ned_m, vel_ned_m_s, self.kp, self.vel_ff_ned_m_s, self.acc_ff_ned_m_s2, self.vmax_h_m_s,
-            self.vmin_d_m_s, self.vmax_d_m_s, self.tko_up_m_s,
-            self._ramp_down_limit() if ramping else self.amax_d_m_s2, ramping,
-            self._drag_v, self._kp_v, self._kd_dt_v, self._ki_dt_v, self._arw_gain, self._lim_h, self._lim_up,
-            self.integ_m_s2, self._prev_vel, self.acc_ned_m_s2, self._att_acc, self._att_alpha,
-            self.yaw_rad, self.yaw_tgt_rad, self._yaw_step_f, self._yaw_busy, *vertical)
+        amax_d = self._ramp_down_limit() if self.ramping else self.amax_d_m_s2
+        self._yaw_busy = kernel(*self.kernel_args(tgt, pos_ned_m, vel_ned_m_s, amax_d), *vertical)
+
+    def kernel_args(self, tgt: np.ndarray, pos_ned_m: np.ndarray, vel_ned_m_s: np.ndarray,
+                    amax_d: np.ndarray) -> tuple:
+        """The controller's arguments of ``fleet_jit.fleet_update`` (no side effect)."""
+        return (tgt, pos_ned_m, vel_ned_m_s, self.kp, self.vel_ff_ned_m_s, self.acc_ff_ned_m_s2,
+                self.vmax_h_m_s, self.vmin_d_m_s, self.vmax_d_m_s, self.tko_up_m_s, amax_d, self.ramping,
+                self._drag_v, self._kp_v, self._kd_dt_v, self._ki_dt_v, self._arw_gain, self._lim_h,
+                self._lim_up, self.integ_m_s2, self._prev_vel, self.acc_ned_m_s2, self._att_acc,
+                self._att_alpha, self.yaw_rad, self.yaw_tgt_rad, self._yaw_step_f, self._yaw_busy)
 
     def _ramp_down_limit(self) -> np.ndarray:
         """Downward acceleration limits with the ramping columns at g: PX4 bounds the thrust, not the

@@ -65,10 +65,7 @@ class GnssEstimator:
         err_fix, innov, avail = self._noise, self._innov, self.available
         self._rng.standard_normal(out=err_fix)      # drawn for all: streams stay aligned
         if jit is not None:
-            rejected = jit.gnss_correct(err_fix, self._sigma, self.noise_scale, self.offset_ned_m,
-                                        self.err_ned_m, innov, self.p.est_gate_m, self.p.est_gain, avail,
-                                        self._ok, self._last_accept_s, t_s, true_pos_ned_m, self.fix_ned_m,
-                                        self.seq)
+            rejected = jit.gnss_correct(*self.kernel_args(t_s, true_pos_ned_m))
             return self._resets(t_s, avail & ~self._ok) if rejected else []
         err_fix *= self._sigma
         err_fix *= self.noise_scale
@@ -82,6 +79,12 @@ class GnssEstimator:
         self.seq += avail
         rejected = avail & ~ok
         return self._resets(t_s, rejected) if np.count_nonzero(rejected) else []
+
+    def kernel_args(self, t_s: float, true_pos_ned_m: np.ndarray) -> tuple:
+        """The arguments of ``fleet_jit.gnss_correct`` (no side effect)."""
+        return (self._noise, self._sigma, self.noise_scale, self.offset_ned_m, self.err_ned_m, self._innov,
+                self.p.est_gate_m, self.p.est_gain, self.available, self._ok, self._last_accept_s, t_s,
+                true_pos_ned_m, self.fix_ned_m, self.seq)
 
     def _resets(self, t_s: float, rejected: np.ndarray) -> list[Reset]:
         due = rejected & (t_s - self._last_accept_s >= self.p.est_reset_timeout_s)

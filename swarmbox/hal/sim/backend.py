@@ -229,11 +229,14 @@ class SimBackend:
         return (self._pos, self._gnss.err_ned_m, self._est, self.airborne, dt_s, self._air_s,
                 self.params.battery_endurance_s, self._battery)
 
+    def _damping(self, dt_s: float) -> float:
+        """The velocity factor of linear drag over ``dt_s``, as pymunk's."""
+        return math.exp(-self.params.drag_n_s_m / self.params.mass_kg * dt_s)
+
     def _vertical_args(self, dt_s: float) -> tuple:
-        damping = math.exp(-self.params.drag_n_s_m / self.params.mass_kg * dt_s)   # as pymunk's
         w = self._world
-        return (self._pos_d, self._vel_d, self.airborne, self._free, self._free_kg, self._mass_kg, damping,
-                dt_s, w.cmd_force_xy, w.cmd_vel_xy)
+        return (self._pos_d, self._vel_d, self.airborne, self._free, self._free_kg, self._mass_kg,
+                self._damping(dt_s), dt_s, w.cmd_force_xy, w.cmd_vel_xy)
 
     def _warm(self, jit: ModuleType) -> None:
         """Have numba load the kernel's code for this fleet's argument types now: it would otherwise do
@@ -263,9 +266,8 @@ class SimBackend:
             raise RuntimeError("SimBackend.step() after close()")
         if not (dt_s > 0 and math.isfinite(dt_s)):
             raise ValueError(f"dt_s must be finite and > 0, got {dt_s!r}")
-        damping = math.exp(-self.params.drag_n_s_m / self.params.mass_kg * dt_s)   # as pymunk's
         self._dt_s, self._t0_s, self._k = dt_s, self.t_s, 0
-        self._vert_k = (np.array(damping), np.array(dt_s))   # 0-d arrays: cheaper operands than floats
+        self._vert_k = (np.array(self._damping(dt_s)), np.array(dt_s))   # 0-d arrays: cheaper operands
         self._vertical = self._vertical_args(dt_s)           # the compiled kernel's
         # two drones closing at twice the speed limit must not pass through each other in one step
         need = math.ceil(dt_s * self.params.mpc_xy_vel_max_m_s / self.params.radius_m - 1e-9)

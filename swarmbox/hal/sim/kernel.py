@@ -1,19 +1,20 @@
-"""The sim backend's per-tick arithmetic as one compiled function (numba), for long runs.
+"""The sim backend's per-step arithmetic as compiled functions (numba), for long runs.
 
-One :meth:`SimBackend.step` runs about sixty numpy calls before pymunk's: the cascaded controller
-(:mod:`swarmbox.hal.sim.control`) and the vertical integration (``SimBackend._integrate_vertical``).
-At a few drones each call costs far more than its arithmetic (a five-drone delivery run spends a
-quarter of its tick there). ``fleet_jit.fleet_update`` does the same work in one loop over the drones,
-compiled by numba on first use and cached on disk; ``gnss_correct`` and ``after_step`` do the same for
-the GNSS fixes (after the noise draw, which stays numpy's) and the end of the step.
+One :meth:`SimBackend.step` runs about sixty numpy calls around pymunk's: the cascaded controller
+(:mod:`swarmbox.hal.sim.control`), the vertical integration (``SimBackend._integrate_vertical``), the
+GNSS corrections (:mod:`swarmbox.hal.sim.sensors`), the estimates and the battery. At a few drones each
+call costs far more than its arithmetic (a five-drone delivery run spent a third of its tick there).
+``fleet_jit`` does the same work as three loops over the drones — ``fleet_update`` (controller and
+vertical integration), ``gnss_correct`` (after the noise draw, which stays numpy's, so the random
+streams are untouched) and ``after_step`` — compiled by numba on first use and cached on disk.
 
-The numpy code stays the reference: this loop repeats its operations one for one and in the same
+The numpy code stays the reference: these loops repeat its operations one for one and in the same
 order (``np.maximum``/``np.minimum`` as their NaN-propagating comparisons, ``hypot`` from the C
 library, Python's float ``%`` as numpy's), so both give bit-identical states;
-``tests/hal/sim/test_kernel.py`` flies every mode both ways and compares every array. Which path a
-run takes is ``backend.jit`` (:class:`~swarmbox.hal.sim.params.SimParams`): under the default
-``auto`` the kernel takes over once the process has flown ``JIT_AFTER_STEPS`` steps on numpy (numba
-installed), and from the first step of every later run in that process.
+``tests/hal/sim/test_kernel.py`` flies every mode both ways and compares every array after every
+step. Which path a run takes is ``backend.jit`` (:class:`~swarmbox.hal.sim.params.SimParams`): under
+the default ``auto`` the kernel takes over once the process has flown ``JIT_AFTER_STEPS`` steps on
+numpy (numba installed), and from the first step of every later run in that process.
 """
 
 from __future__ import annotations

@@ -14,7 +14,10 @@ file again. From there a job is the
 joblib launcher's: :func:`execute_job` composes its config with ``load_sweep_config``, sets
 ``hydra.job.id`` / ``num`` and calls ``run_job``. Jobs run in loky processes through
 ``joblib.Parallel`` with the launcher's joblib settings, in the same order, returning the same
-:class:`~hydra.core.utils.JobReturn` values.
+:class:`~hydra.core.utils.JobReturn` values. Unlike joblib's, a worker routes SIGINT / SIGTERM
+through :mod:`swarmbox.run.interrupt`, as the command line does in a lone sweep process: Ctrl-C ends
+the runs in flight as ``interrupted`` with their files written, starts no later job, and the sweep
+closes with its summary instead of a traceback.
 """
 
 from __future__ import annotations
@@ -38,6 +41,8 @@ from joblib import Parallel, delayed
 from joblib.externals import cloudpickle  # what loky pickles jobs with: a task function in __main__ travels
 from omegaconf import DictConfig, open_dict
 
+from swarmbox.run import interrupt
+
 log = logging.getLogger(__name__)
 
 CONTEXT_PREFIX = "swarmbox-launch-"
@@ -54,6 +59,7 @@ class LaunchContext:
 
 
 _loaded: dict[str, LaunchContext] = {}   # in a worker: the context file met last, by path
+_launcher_pid: int | None = None          # the process that launched (n_jobs=1 runs the jobs there)
 
 
 def write_context(context: LaunchContext) -> Path:
@@ -79,6 +85,8 @@ def load_context(path: str) -> LaunchContext:
         Singleton.set_state(context.singleton_state)
         _loaded.clear()          # a reused worker holds only the current launch
         _loaded[path] = context
+        if os.getpid() != _launcher_pid:   # a worker process: signals as in a lone sweep process
+            interrupt.install()            # (the run in flight ends interrupted, no later job starts)
     return context
 
 
@@ -98,6 +106,8 @@ def execute_job(idx: int, overrides: Sequence[str], context_path: str) -> JobRet
 def launch(launcher: JoblibLauncher, job_overrides: Sequence[Sequence[str]],
            initial_job_idx: int) -> Sequence[JobReturn]:
     """The joblib launcher's ``launch``, each job carrying only its index, overrides and the context file."""
+    global _launcher_pid
+    _launcher_pid = os.getpid()
     setup_globals()
     assert launcher.config is not None
     assert launcher.task_function is not None

@@ -212,3 +212,16 @@ def test_vehicle_speaks_px4(vehicle):
     gcs.send(b"\xfd\x09garbage" + bytes(range(40)))
     assert gcs.command(0, mc.CMD_ARM_DISARM, 1.0)[0].result == mc.RESULT_ACCEPTED    # 0: broadcast
     assert any(v.armed for _, v in gcs.collect(1.0) if isinstance(v, mc.HeartbeatMsg))
+
+
+def test_sim_params_on_the_command_line_keep_their_types():
+    """``--sim-param KEY=VALUE`` (what the mavsim backend passes for ``backend.sim``) by SimParams' types."""
+    from swarmbox.hal.mavsim.process import sim_params_of
+
+    params = sim_params_of(["land_at_stop_point=True", "acc_hor_max_offboard=false", "physics_substeps=2",
+                            "mass_kg=2"])
+    assert params == {"jit": "never", "land_at_stop_point": True, "acc_hor_max_offboard": False,
+                      "physics_substeps": 2, "mass_kg": 2.0}
+    assert type(params["physics_substeps"]) is int
+    with pytest.raises(ValueError, match="'land_at_stop_point' must be true or false, got 'maybe'"):
+        sim_params_of(["land_at_stop_point=maybe"])

@@ -40,7 +40,7 @@ class MavsimOptions:
 
     vehicle_tick_s: float = 0.01        # physics step of each vehicle (simulation s)
     offboard_loss: str = "hold"         # failsafe when setpoints stop in OFFBOARD: hold | land | rtl
-    sim: Mapping[str, float] | None = None   # sim backend parameters for the vehicles' dynamics
+    sim: Mapping[str, float | bool | str] | None = None   # sim backend parameters for the vehicles
     refuse: Mapping[str, tuple[str, ...]] | None = None   # drone_<i> -> commands it denies (faults)
 
 
@@ -154,7 +154,8 @@ class MavsimBackend(Px4Backend):
     def __init__(self, *, homes_ned_m: Sequence[Sequence[float]], tick_s: float, rng: np.random.Generator,
                  obstacles: Sequence[Mapping[str, Any]] = (), limits: SafetyLimits = SafetyLimits(),
                  vehicle_tick_s: float = 0.01, offboard_loss: str = "hold",
-                 sim: Mapping[str, float] | None = None, refuse: Mapping[Any, Sequence[str]] | None = None,
+                 sim: Mapping[str, float | bool | str] | None = None,
+                 refuse: Mapping[Any, Sequence[str]] | None = None,
                  **params: Any) -> None:
         if params.get("px4_build"):
             raise ValueError("mavsim backend: px4_build is not used (use backend=px4 to launch PX4 SITL)")

@@ -114,7 +114,7 @@ def sim_params_of(items: Sequence[str]) -> dict[str, float | str]:
         key, sep, value = item.partition("=")
         if not sep:
             raise ValueError(f"--sim-param expects KEY=VALUE, got {item!r}")
-        out[key] = value if key == "jit" else float(value)
+        out[key] = SimParams.parse(key, value)
     SimParams.from_kwargs(out)
     return out
 

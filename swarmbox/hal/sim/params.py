@@ -86,13 +86,28 @@ class SimParams:
         p.validate()
         return p
 
+    @classmethod
+    def parse(cls, name: str, text: str) -> Any:
+        """The value of field ``name`` written as ``text`` (a command-line ``KEY=VALUE``), by the field's
+        type: ``str`` as is, ``bool`` from true/false (any case) or 1/0, ``int``, else ``float``. An
+        unknown name is parsed as a float and left for :meth:`from_kwargs` to name."""
+        kind = _FIELD_TYPES.get(name, "float")
+        if kind == "str":
+            return text
+        if kind == "bool":
+            word = text.strip().lower()
+            if word not in ("true", "false", "1", "0"):
+                raise ValueError(f"sim backend parameter {name!r} must be true or false, got {text!r}")
+            return word in ("true", "1")
+        return int(text) if kind == "int" else float(text)
+
     def validate(self) -> None:
         """Raise ValueError naming the first out-of-range field."""
         if self.jit not in JIT_CHOICES:
             raise ValueError(f"sim backend parameter 'jit' must be one of {', '.join(JIT_CHOICES)}, "
                              f"got {self.jit!r}")
         for f in fields(self):
-            if f.name == "jit":
+            if _FIELD_TYPES[f.name] == "str":
                 continue
             v = getattr(self, f.name)
             if not math.isfinite(v) or v < 0:
@@ -114,3 +129,6 @@ class SimParams:
     def acc_hor_limit_m_s2(self) -> float:
         """Horizontal acceleration limit of the automatic modes: MPC_ACC_HOR_MAX within the tilt limit."""
         return min(self.mpc_acc_hor_max_m_s2, self.acc_tilt_limit_m_s2)
+
+
+_FIELD_TYPES = {f.name: str(f.type) for f in fields(SimParams)}   # "float", "int", "bool", "str"

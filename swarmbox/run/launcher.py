@@ -38,7 +38,7 @@ from hydra.types import HydraContext, TaskFunction
 from hydra_plugins.hydra_joblib_launcher._core import process_joblib_cfg
 from hydra_plugins.hydra_joblib_launcher.joblib_launcher import JoblibLauncher
 from joblib import Parallel, delayed
-from joblib.externals import cloudpickle  # what loky pickles jobs with: a task function in __main__ travels
+import cloudpickle  # what loky pickles jobs with: a task function in __main__ travels
 from omegaconf import DictConfig, open_dict
 
 from swarmbox.run import interrupt

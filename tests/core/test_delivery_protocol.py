@@ -137,7 +137,7 @@ def _simulate(n, send_ticks, drop, delay, cut, stage_lag):
     for tick in range(3000):
         sender_stage = 2 + sum(tick >= t for t in (send_ticks[len(send_ticks) // 2],))
         receiver_stage = 2 + sum(tick >= t + stage_lag for t in (send_ticks[len(send_ticks) // 2],))
-        def hand_over(cmds):
+        def hand_over(cmds, tick=tick, receiver_stage=receiver_stage):
             for c in cmds:
                 delivered.append((c, receiver_stage))
                 transmit(tick, "ack", c.seq)         # acknowledged once delivered, never before

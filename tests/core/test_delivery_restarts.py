@@ -121,7 +121,8 @@ def simulate(sends: dict, outages: list, drop: list, delay: list) -> World:
             down_long = any(n == receiver and down + LOST_TICKS <= tick < up for n, down, up in outages)
             if down_long and (p.incarnation, receiver) not in forgotten:   # the superior's inferior_lost
                 forgotten.add((p.incarnation, receiver))
-                world.undelivered.update((sender, p.incarnation, receiver, s) for s, _ in p.outbox.forget(receiver))
+                dropped = p.outbox.forget(receiver)
+                world.undelivered.update((sender, p.incarnation, receiver, s) for s, _ in dropped)
             if not down_long:
                 forgotten.discard((p.incarnation, receiver))
             if tick in sends[sender] and not down_long:   # send_task refuses a lost inferior

@@ -25,7 +25,7 @@ from swarmbox.analysis.load import load_run
 from tests.run.test_distributed import ROOT, events, finish, launch, wait_started
 
 pytestmark = pytest.mark.slow
-TASKING = ["algo=hover", "mission=hover", "topology=leader_follower", "algo.params.hover_s=30",
+TASKING = ["algo=hover", "mission=hover", "topology=leader_follower", "algo.params.hover_s=20",
            "algo.drone._target_=tests.run.restart_algos.TaskingDrone",
            "+algo.ground._target_=tests.run.restart_algos.TaskingGround",
            # followers and the ground must outlast a restart (a few seconds) before handing over
@@ -118,7 +118,7 @@ def test_ground_and_leader_killed_and_restarted_mid_execution(tmp_path):
     adopted = g_events[g_events["name"] == "stage_adopted"]
     assert len(adopted) == 1 and json.loads(adopted["data"].iloc[0])["stage"] == "EXECUTION", console
     g_stages = pd.read_parquet(run_dir / "logs" / "ground" / "stages.parquet")["name"].tolist()
-    assert g_stages == ["ICEBREAK", "PREPARATION", "EXECUTION", "LANDING", "TERMINATION"], g_stages
+    assert g_stages == ["ICEBREAK", "PREPARATION", "EXECUTION", "LANDING", "TERMINATION"], (g_stages, console)
     assert manifest["node_results"]["ground"]["status"] == "ok", console
     leader_back = events(run_dir, "drone_0").query("name == 'process_restarted'")["t_s"].iloc[0]
     # every reliable task sent after both restarts: exactly once, or logged undelivered

@@ -29,6 +29,7 @@ import pandas as pd
 import seaborn as sns
 from matplotlib.figure import Figure
 
+from experiments.rq4_delivery import publish
 from swarmbox.analysis import analyze_sweep, find_runs
 from swarmbox.analysis.figures import save
 from swarmbox.analysis.load import GROUND, read_manifest, read_table
@@ -158,6 +159,8 @@ def summary_of(sweep: Path) -> pd.DataFrame:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("sweep", type=Path, help="the RQ4 sweep directory")
+    parser.add_argument("--publish", action="store_true",
+                        help="also write the README's data and tables (experiments/rq4_delivery/results/)")
     args = parser.parse_args(argv)
     matplotlib.use("Agg")
     summary = summary_of(args.sweep)
@@ -176,6 +179,9 @@ def main(argv: list[str] | None = None) -> int:
     print((tables / "rq4_table.md").read_text())
     print(f"pooled package waits:\n{(tables / 'rq4_package_waits.md').read_text()}")
     print(f"figures written under {figures}")
+    if args.publish:
+        for path in publish.write(tables):
+            print(f"published {path}")
     return 0 if np.isfinite(summary["mean"]).any() else 1
 
 

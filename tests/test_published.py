@@ -4,16 +4,20 @@
 data disagree); the other tests pin what it catches on small documents written here.
 """
 
+import importlib.util
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
 from experiments import published
 from experiments.rq4_delivery import publish
+from swarmbox.analysis import detection
 from swarmbox.analysis.compare import compare, has_regression, load_config, load_summary
+from swarmbox.analysis.tables import to_markdown
 
 ROOT = Path(__file__).resolve().parents[1]
 TABLE = "| a | b |\n|---|---|\n| x | 1.5 |\n"
@@ -124,3 +128,18 @@ def test_rq4_gate_catches_a_move_far_below_five_percent():
     moved = baseline.copy()
     moved.loc[timing, "value"] *= 3                   # machine figures are not gated
     assert not has_regression(compare(baseline, moved, config))
+
+
+def test_rq3_bench_tables_rebuild_from_the_committed_rows():
+    """The README's two benchmark tables are what report.py makes of bench/bench_runs.csv, exactly."""
+    script = ROOT / "experiments" / "rq3_faults" / "report.py"
+    spec = importlib.util.spec_from_file_location("rq3_report", script)
+    report = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(report)
+    bench = ROOT / "experiments" / "rq3_faults" / "bench"
+    rows = report.read_rows(bench / "bench_runs.csv")
+    assert (bench / "smallest_detected_heldout.md").read_text() == to_markdown(report.held_out_table(rows))
+    default = rows[report.is_default_setting(rows)]
+    fixed = detection.smallest_detected(detection.detection_rates(default),
+                                        detection.false_alarm_rates(default), max_fa=np.inf)
+    assert (bench / "smallest_detected_default.md").read_text() == to_markdown(report.acceptance_table(fixed))

@@ -2,6 +2,8 @@
 
     python experiments/rq3_faults/report.py rq3   results/rq3   --out experiments/rq3_faults/tables
     python experiments/rq3_faults/report.py bench results/bench --out experiments/rq3_faults/bench
+    python experiments/rq3_faults/report.py bench experiments/rq3_faults/bench/bench_runs.csv \
+        --out experiments/rq3_faults/bench       # again from the committed rows, no runs needed
 
 The rows come from :func:`swarmbox.analysis.detection.evaluate_run`: the analyzer scanned every run
 without the fault events, and the scoring columns were added afterwards from them. Paper Tables 2,
@@ -24,9 +26,12 @@ sys.path.insert(0, str(HERE.parents[1]))
 
 from sweep import collect  # noqa: E402
 
-from swarmbox.analysis import detection  # noqa: E402
+from swarmbox.analysis import benchstats, detection  # noqa: E402
 from swarmbox.analysis.tables import to_markdown, write_table  # noqa: E402
 
+#: Seeds whose runs choose the detector setting of the held-out table; every other seed reports it.
+#: Faulty runs have seeds 0-2 (9 drones) or 0-1 (36 drones), healthy runs 100-103 / 100-101.
+CALIBRATION_SEEDS = (0, 100, 101)
 UNITS = {"gps_drift": "m/s", "gps_bias": "m", "gps_noise": "x sigma", "latency": "ms", "packet_loss": "ratio",
          "burst_loss": "p_enter"}
 
@@ -127,16 +132,42 @@ def rq3_report(rows: pd.DataFrame, out: Path, root: Path) -> list[Path]:
     return written + timeline_figures(root, out)
 
 
+def with_counts_ci(smallest: pd.DataFrame) -> pd.DataFrame:
+    """A :func:`detection.smallest_detected` table plus the detected/runs count at the reported
+    magnitude with its exact interval, and the false-alarm count with its exact rate interval."""
+    k = (smallest["detection_rate"] * smallest["runs_per_magnitude"]).round()
+    det = [benchstats.binomial_ci(int(x), int(n)) if np.isfinite(x) else (np.nan, np.nan)
+           for x, n in zip(k, smallest["runs_per_magnitude"], strict=True)]
+    alarms = (smallest["fa_per_drone_h"] * smallest["healthy_drone_h"]).round().astype(int)
+    fa = [benchstats.poisson_rate_ci(int(a), float(h)) for a, h in
+          zip(alarms, smallest["healthy_drone_h"], strict=True)]
+    return smallest.assign(detected=[f"{int(x)}/{int(n)}" if np.isfinite(x) else "" for x, n in
+                                     zip(k, smallest["runs_per_magnitude"], strict=True)],
+                           detection_ci_low=[d[0] for d in det], detection_ci_high=[d[1] for d in det],
+                           false_alarms=alarms, fa_ci_high=[f[1] for f in fa])
+
+
 def acceptance_table(smallest: pd.DataFrame) -> pd.DataFrame:
-    """Per fault, swarm size and network: the smallest magnitude found in >= 90 % of the runs by the
-    most sensitive setting with <= 1 false alarm per drone-hour."""
-    view = smallest.copy()
+    """Per fault, swarm size and network: the smallest magnitude found in >= 90 % of the runs, its
+    count and 95 % interval, and the false alarms over the healthy drone-hours with the rate's 95 %
+    upper bound."""
+    view = with_counts_ci(smallest)
     view["smallest_magnitude"] = [f"{m:g} {UNITS.get(f, '')}" if np.isfinite(m) else "none of the swept"
                                   for m, f in zip(view["smallest_magnitude"], view["fault"], strict=True)]
-    cols = ["fault", "detector", "n_drones", "network", "smallest_magnitude", "detection_rate",
-            "localization", "t_f_median_s", "rule", "threshold_scale", "fa_per_drone_h", "healthy_drone_h",
-            "runs_per_magnitude"]
+    cols = ["fault", "detector", "n_drones", "network", "smallest_magnitude", "detected", "detection_ci_low",
+            "detection_ci_high", "t_f_median_s", "rule", "threshold_scale", "false_alarms", "healthy_drone_h",
+            "fa_ci_high"]
     return view[cols].sort_values(["fault", "detector", "n_drones", "network"]).reset_index(drop=True)
+
+
+def held_out_table(rows: pd.DataFrame) -> pd.DataFrame:
+    """The detector setting chosen per cell on :data:`CALIBRATION_SEEDS`, reported on the others."""
+    out = benchstats.held_out_smallest(rows, CALIBRATION_SEEDS)
+    out = out[out["detector"] == "swarmbox"].copy()
+    for col in ("calibration_magnitude", "smallest_magnitude"):
+        out[col] = [f"{m:g} {UNITS.get(f, '')}" if np.isfinite(m) else "none of the swept"
+                    for m, f in zip(out[col], out["fault"], strict=True)]
+    return out.sort_values(["fault", "n_drones", "network"]).reset_index(drop=True)
 
 
 def bench_report(rows: pd.DataFrame, out: Path, root: Path) -> list[Path]:
@@ -145,13 +176,13 @@ def bench_report(rows: pd.DataFrame, out: Path, root: Path) -> list[Path]:
     fa = detection.false_alarm_rates(rows)
     fa_healthy = detection.false_alarm_rates(rows, healthy_runs_only=True)
     det = detection.detection_rates(rows)
-    smallest = detection.smallest_detected(det, fa)
-    written = write_table(rows, out, "bench_runs", markdown=False)
-    written += write_table(fa, out, "false_alarms")
-    written += write_table(fa_healthy, out, "false_alarms_healthy_runs")
-    written += write_table(det, out, "detection_rates")
-    accept = acceptance_table(smallest)
-    written += write_table(accept, out, "smallest_detected")
+    # rows read back from a committed bench_runs.csv are its input: not rewritten
+    written = [] if root.suffix == ".csv" else write_table(rows, out, "bench_runs", markdown=False)
+    written += write_table(benchstats.with_false_alarm_ci(fa), out, "false_alarms")
+    written += write_table(benchstats.with_false_alarm_ci(fa_healthy), out, "false_alarms_healthy_runs")
+    written += write_table(benchstats.with_detection_ci(det), out, "detection_rates")
+    held = held_out_table(rows)
+    written += write_table(held, out, "smallest_detected_heldout")
     is_default = is_default_setting(rows)
     fixed = detection.smallest_detected(detection.detection_rates(rows[is_default]),
                                         detection.false_alarm_rates(rows[is_default]), max_fa=np.inf)
@@ -160,25 +191,41 @@ def bench_report(rows: pd.DataFrame, out: Path, root: Path) -> list[Path]:
     written += figures.save(diagnosis_plots.detection_curves(default, units=UNITS), out, "detection_rate",
                             formats=("png",))
     written += figures.save(diagnosis_plots.roc_curves(detection.roc(rows)), out, "roc", formats=("png",))
-    print(to_markdown(accept))
+    print(to_markdown(held))
     return written
+
+
+def read_rows(source: Path) -> pd.DataFrame:
+    """Diagnosis rows: every ``diagnosis.parquet`` below a sweep directory, or a committed
+    ``bench_runs.csv`` / ``rq3_runs.csv``. Rows written before persistence was a duration
+    (``persist_ticks`` of the 25 ms grid) get the ``persist_s`` the analyzer now uses."""
+    if source.suffix == ".csv":
+        rows = pd.read_csv(source)
+    else:
+        rows = collect(source)
+        if rows.empty:
+            return rows
+        rows = rows.assign(run=[str(Path(r).relative_to(source.resolve()) if Path(r).is_absolute() else
+                                    Path(r).relative_to(source)) for r in rows["run"]])
+    if "persist_s" in detection.SETTING and "persist_ticks" in rows and "persist_s" not in rows:
+        ticks = rows.pop("persist_ticks")
+        rows["persist_s"] = np.where(ticks > 1, ticks * 0.025, 0.0)
+    return rows
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("which", choices=["rq3", "bench"])
-    p.add_argument("root", type=Path)
+    p.add_argument("root", type=Path, help="a sweep directory, or a committed *_runs.csv")
     p.add_argument("--out", type=Path, required=True)
     args = p.parse_args(argv)
     import matplotlib
 
     matplotlib.use("Agg")
-    rows = collect(args.root)
+    rows = read_rows(args.root)
     if rows.empty:
-        print(f"error: no diagnosis.parquet below {args.root}", file=sys.stderr)
+        print(f"error: no diagnosis rows in {args.root}", file=sys.stderr)
         return 2
-    rows = rows.assign(run=[str(Path(r).relative_to(args.root.resolve()) if Path(r).is_absolute() else
-                                Path(r).relative_to(args.root)) for r in rows["run"]])
     rows = rows.sort_values(["run", "detector", "rule", "threshold_scale"]).reset_index(drop=True)
     written = (rq3_report if args.which == "rq3" else bench_report)(rows, args.out, args.root)
     print(f"{rows['run'].nunique()} runs, {len(written)} files written under {args.out}")

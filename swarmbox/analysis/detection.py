@@ -60,39 +60,47 @@ def baseline_alarms(resets: pd.DataFrame, series: dg.Series, opts: dg.DiagnosisO
     return pd.DataFrame(rows, columns=dg.ALARM_COLUMNS)
 
 
+def truth_fields(truth: scoring.Truth | None, index: int, run, flow=None) -> dict:
+    """The columns that say which injected fault a row is scored against."""
+    row = {"truth": index, "fault": truth.name if truth else "none", "magnitude": magnitude(truth),
+           "target": truth.target if truth else None, "onset_u": truth.onset_u if truth else np.nan}
+    if flow is not None and truth is not None and truth.name in ("latency", "packet_loss", "burst_loss"):
+        row["measured"] = scoring.measured_excess(flow, run.drones, truth)
+    return row
+
+
 def evaluate_run(run_dir: str | Path, settings: Sequence[dg.DiagnosisOptions],
                  grace_s: float = scoring.GRACE_S) -> pd.DataFrame:
-    """One row per detector setting (and one for the estimator baseline) of one run."""
+    """One row per detector setting (and for the estimator baseline) and injected truth of one run:
+    every fault is scored (composed faults, every target), a fault on every drone once, as swarm-wide
+    (:func:`.scoring.scored_truths`)."""
     run = load_run(run_dir)
     unify(run)
     span = dg.scan_span(run, settings[0].stage)
     series = dg.drone_series(run, settings[0], span)
-    truths = scoring.ground_truth(run.tables["events"])
-    truth = truths[0] if truths else None
+    truths = scoring.scored_truths(scoring.ground_truth(run.tables["events"]), list(run.drones))
     n = len(run.drones)
     base = {"run": str(run_dir), "seed": run.manifest.get("seed"), "n_drones": n,
-            "network": run.manifest.get("choices", {}).get("network"),
-            "fault": truth.name if truth else "none", "magnitude": magnitude(truth),
-            "target": truth.target if truth else None, "onset_u": truth.onset_u if truth else np.nan,
-            "scan_s": span[1] - span[0]}
-    if truth is not None and truth.name in ("latency", "packet_loss", "burst_loss"):
-        flow = network.message_flow(run.tables["messages"])
-        base["measured"] = scoring.measured_excess(flow, run.drones, truth)
+            "network": run.manifest.get("choices", {}).get("network"), "scan_s": span[1] - span[0]}
+    network_truths = any(t.name in ("latency", "packet_loss", "burst_loss") for t in truths)
+    flow = network.message_flow(run.tables["messages"]) if network_truths else None
+    per_truth = [truth_fields(t, i, run, flow) for i, t in enumerate(truths)] or [truth_fields(None, 0, run)]
     rows = []
     for opts in settings:
         alarms = dg.scan(series, opts)
         first = dg.finding(alarms)
-        rows.append({**base, "detector": "swarmbox", "rule": opts.rule,
-                     "threshold_scale": opts.threshold_scale, "persist_ticks": opts.persist_ticks,
-                     "alarms": len(alarms),
-                     "first_alarm_drone": first.get("drone"), "first_alarm_metric": first.get("metric"),
-                     **scoring.score_alarms(alarms, truth, span, n, grace_s)})
+        setting = {"detector": "swarmbox", "rule": opts.rule, "threshold_scale": opts.threshold_scale,
+                   "persist_ticks": opts.persist_ticks, "alarms": len(alarms),
+                   "first_alarm_drone": first.get("drone"), "first_alarm_metric": first.get("metric")}
+        grades = scoring.score_truths(alarms, truths, span, n, grace_s)
+        rows += [{**base, **t, **setting, **g} for t, g in zip(per_truth, grades, strict=True)]
     resets = baseline_alarms(dg.estimator_alarms(run, span), series, settings[0])
-    rows.append({**base, "detector": "baseline", "rule": "estimator_reset", "threshold_scale": 1.0,
-                 "persist_ticks": 1, "alarms": len(resets),
-                 "first_alarm_drone": int(resets["drone"].iloc[0]) if len(resets) else None,
-                 "first_alarm_metric": "estimator_reset" if len(resets) else None,
-                 **scoring.score_alarms(resets, truth, span, n, grace_s)})
+    setting = {"detector": "baseline", "rule": "estimator_reset", "threshold_scale": 1.0, "persist_ticks": 1,
+               "alarms": len(resets),
+               "first_alarm_drone": int(resets["drone"].iloc[0]) if len(resets) else None,
+               "first_alarm_metric": "estimator_reset" if len(resets) else None}
+    grades = scoring.score_truths(resets, truths, span, n, grace_s)
+    rows += [{**base, **t, **setting, **g} for t, g in zip(per_truth, grades, strict=True)]
     return pd.DataFrame(rows)
 
 
@@ -103,7 +111,7 @@ def false_alarm_rates(rows: pd.DataFrame, by: Sequence[str] = ("n_drones", "netw
     keys = [*SETTING, *by]
     g = data.groupby(keys, dropna=False)
     out = g.agg(false_alarms=("false_alarms", "sum"), healthy_drone_h=("healthy_drone_h", "sum"),
-                runs=("run", "count")).reset_index()
+                runs=("run", "nunique")).reset_index()   # a run with two truths is one run
     out["fa_per_drone_h"] = out["false_alarms"] / out["healthy_drone_h"].where(out["healthy_drone_h"] > 0)
     return out
 

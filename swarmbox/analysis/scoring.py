@@ -33,6 +33,7 @@ from swarmbox.analysis import network
 from swarmbox.analysis.unify import T
 
 GRACE_S = 10.0
+GROUND = -1     # a fault's target id for the ground node
 
 
 @dataclass(frozen=True)
@@ -63,6 +64,26 @@ def ground_truth(events: pd.DataFrame) -> list[Truth]:
         end = float(ends[T].iloc[0]) if len(ends) else None
         out.append(Truth(name, target, float(row[T]), end, data))
     return out
+
+
+def scored_truths(truths: list[Truth], drones: list[int]) -> list[Truth]:
+    """The truths a run is scored on: one per (fault, onset) that targets some drones, one per
+    target drone; a fault that hits every drone (or the ground, target -1) at once becomes a single
+    swarm-wide truth with ``target`` None, detected by an alarm on any drone."""
+    groups: dict[tuple[str, float], list[Truth]] = {}
+    for t in truths:
+        groups.setdefault((t.name, t.onset_u), []).append(t)
+    out = []
+    for (name, onset), group in groups.items():
+        targets = {t.target for t in group}
+        if None in targets or GROUND in targets or (drones and targets >= set(drones)):
+            ends = [t.end_u for t in group]
+            end = None if None in ends else max(ends)
+            params = {k: v for k, v in group[0].params.items() if k != "target"}
+            out.append(Truth(name, None, onset, end, params))
+        else:
+            out.extend(group)
+    return sorted(out, key=lambda t: (t.onset_u, t.name, -1 if t.target is None else t.target))
 
 
 def _target_of(data: str) -> int | None:
@@ -125,20 +146,34 @@ def false_alarms(times: np.ndarray, span: tuple[float, float], truths: list[Trut
 
 def score_alarms(alarms: pd.DataFrame, truth: Truth | None, span: tuple[float, float], n_drones: int,
                  grace_s: float = GRACE_S) -> dict:
-    """One run's grade: detection, localization, t_f / tau_d / Sigma_a, and false alarms."""
+    """One run's grade against one truth: detection, localization, t_f / tau_d / Sigma_a, and false
+    alarms. A swarm-wide truth (target None) is detected and localized by an alarm on any drone."""
+    [row] = score_truths(alarms, [truth] if truth is not None else [], span, n_drones, grace_s)
+    return row
+
+
+def score_truths(alarms: pd.DataFrame, truths: list[Truth], span: tuple[float, float], n_drones: int,
+                 grace_s: float = GRACE_S) -> list[dict]:
+    """One grade per truth (one row when there is none). False alarms and healthy time are counted
+    once per run, outside every truth's window, and sit on the first row (0 on the others), so that
+    summing rows never counts a run's healthy flight twice."""
     inc = incidents(alarms) if len(alarms) else pd.DataFrame(columns=[T, "drone"])
-    truths = [truth] if truth is not None else []
-    row = {"false_alarms": false_alarms(inc[T].to_numpy(), span, truths, grace_s),
-           "healthy_drone_h": healthy_time(span, truths, grace_s) * n_drones / 3600.0}
-    if truth is None:
-        return row
+    common = {"false_alarms": false_alarms(inc[T].to_numpy(), span, truths, grace_s),
+              "healthy_drone_h": healthy_time(span, truths, grace_s) * n_drones / 3600.0}
+    if not truths:
+        return [common]
+    rest = {"false_alarms": 0, "healthy_drone_h": 0.0}
+    return [(common if i == 0 else rest) | _grade(alarms, t, span) for i, t in enumerate(truths)]
+
+
+def _grade(alarms: pd.DataFrame, truth: Truth, span: tuple[float, float]) -> dict:
     end = truth.end_u if truth.end_u is not None else span[1]
     during = alarms[(alarms[T] >= truth.onset_u) & (alarms[T] <= end)]
-    mine = during[during["drone"] == truth.target]
+    mine = during if truth.target is None else during[during["drone"] == truth.target]
     first_drone = int(during.iloc[0]["drone"]) if len(during) else None
-    row |= {"detected": bool(len(mine)), "localized": first_drone is not None and first_drone == truth.target,
-            "first_drone": first_drone,
-            "first_metric": str(during.iloc[0]["metric"]) if len(during) else None}
+    localized = first_drone is not None and (truth.target is None or first_drone == truth.target)
+    row = {"detected": bool(len(mine)), "localized": localized, "first_drone": first_drone,
+           "first_metric": str(during.iloc[0]["metric"]) if len(during) else None}
     if len(mine):
         first = mine.iloc[0]
         row |= {"t_f_s": float(first[T] - truth.onset_u), "tau_d": float(first["value"]),

@@ -99,3 +99,18 @@ def test_a_healthy_hover_raises_no_alarm(run):
     rows = graded(d)
     assert rows.loc["swarmbox", "alarms"] == 0 and rows.loc["swarmbox", "false_alarms"] == 0
     assert rows.loc["swarmbox", "fault"] == "none" and rows.loc["swarmbox", "healthy_drone_h"] > 0
+
+
+@pytest.mark.slow
+def test_every_injected_fault_of_a_composed_run_is_scored(run):
+    """fault=[latency,packet_loss] on one drone: one row per truth and detector, both found; the run's
+    healthy flight and false alarms counted once."""
+    _, d = run(*HOVER, "fault=[latency,packet_loss]", "fault.latency.latency_ms=15",
+               "fault.packet_loss.loss_prob=0.4", *WINDOW)
+    rows = detection.evaluate_run(d, DEFAULT)
+    sb = rows[rows["detector"] == "swarmbox"].set_index("fault")
+    assert list(sb.index) == ["latency", "packet_loss"] and list(sb["truth"]) == [0, 1]
+    assert sb["detected"].all() and sb["localized"].all() and (sb["target"] == 2).all()
+    assert sb.loc["packet_loss", "healthy_drone_h"] == 0 and sb.loc["latency", "healthy_drone_h"] > 0
+    fa = detection.false_alarm_rates(rows)
+    assert list(fa["runs"]) == [1, 1]                                 # one run per detector, not two

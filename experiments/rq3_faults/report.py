@@ -69,32 +69,64 @@ def summarize(rows: pd.DataFrame) -> pd.DataFrame:
 
 def _cell(r: pd.Series | None, key: str, scale: float = 1.0) -> str:
     if r is None or r["detected"] == 0:
-        return "Not detected" if key == "t_f_s" else "N/A"
+        return "not detected" if key == "t_f_s" else "N/A"
     v = r[key] * scale
     text = "∞" if np.isinf(v) else f"{v:.2f}"
     return text if r["detected"] == r["runs"] else f"{text} ({r['detected']}/{r['runs']})"
 
 
-def table2(summary: pd.DataFrame) -> pd.DataFrame:
+def count_ci(k: int, n: int) -> str:
+    """``k/n [low, high]``: a count with its exact 95 % interval, in percent."""
+    low, high = benchstats.binomial_ci(int(k), int(n))
+    return f"{int(k)}/{int(n)} [{100 * low:.0f} %, {100 * high:.0f} %]"
+
+
+def paper_values(path: Path = HERE / "tables" / "paper.csv") -> dict[tuple, str]:
+    """The paper's Tables 2, 4 and 5 as printed (transcribed): (fault, magnitude, detector, quantity)
+    -> text."""
+    paper = pd.read_csv(path, dtype={"paper": str}, keep_default_na=False)
+    return {(f, float(m), d, q): v for f, m, d, q, v in paper.itertuples(index=False)}
+
+
+def _with_paper(now: str, paper: dict, key: tuple) -> str:
+    return f"{now} / {paper[key]}" if key in paper else now
+
+
+def table2(summary: pd.DataFrame, paper: dict | None = None) -> pd.DataFrame:
+    """Paper Table 2 (GNSS drift): each cell ``now / paper``; detection and localization counts of
+    the SwarmBox detector with their 95 % intervals."""
+    paper = paper_values() if paper is None else paper
     out = []
     for mag, g in summary[summary["fault"] == "gps_drift"].groupby("magnitude", sort=True):
         by = {r["detector"]: r for _, r in g.iterrows()}
         b, s = by.get("baseline"), by.get("swarmbox")
-        row = {"drift_m_s": mag}
-        for key, name in (("t_f_s", "t_f (s)"), ("tau_d", "tau_d (m)"), ("sigma_a", "Sigma_a")):
-            row[f"{name} baseline"], row[f"{name} SwarmBox"] = _cell(b, key), _cell(s, key)
-        row["first alarm on target"] = f"{s['localized']}/{s['runs']}" if s is not None else ""
+        row = {"drift_m_s": f"{mag:g}"}
+        for key, name, q in (("t_f_s", "t_f (s)", "t_f"), ("tau_d", "tau_d (m)", "tau_d"),
+                             ("sigma_a", "Sigma_a", "sigma_a")):
+            row[f"{name} baseline"] = _with_paper(_cell(b, key), paper, ("gps_drift", mag, "baseline", q))
+            row[f"{name} SwarmBox"] = _with_paper(_cell(s, key), paper, ("gps_drift", mag, "swarmbox", q))
+        row["detected (SwarmBox)"] = count_ci(s["detected"], s["runs"]) if s is not None else ""
+        row["first alarm on target"] = count_ci(s["localized"], s["runs"]) if s is not None else ""
         out.append(row)
     return pd.DataFrame(out)
 
 
-def network_table(summary: pd.DataFrame, fault: str) -> pd.DataFrame:
+def network_table(summary: pd.DataFrame, fault: str, paper: dict | None = None) -> pd.DataFrame:
+    """Paper Table 4 (latency) or 5 (loss): each cell ``now / paper``, the measured excess, and the
+    detection and localization counts with their 95 % intervals."""
+    paper = paper_values() if paper is None else paper
     part = summary[(summary["fault"] == fault) & (summary["detector"] == "swarmbox")].sort_values("magnitude")
     unit, k, label = ("ms", 1.0, " ms") if fault == "latency" else ("%", 100.0, " %")
-    lines = {"t_f (ms)": lambda r: _cell(r, "t_f_s", 1e3), f"tau_d ({unit})": lambda r: _cell(r, "tau_d", k),
-             "Sigma_a": lambda r: _cell(r, "sigma_a"),
+
+    def now_paper(q: str, cell):
+        return lambda r: _with_paper(cell(r), paper, (fault, float(r["magnitude"]), "swarmbox", q))
+
+    lines = {"t_f (ms)": now_paper("t_f", lambda r: _cell(r, "t_f_s", 1e3)),
+             f"tau_d ({unit})": now_paper("tau_d", lambda r: _cell(r, "tau_d", k)),
+             "Sigma_a": now_paper("sigma_a", lambda r: _cell(r, "sigma_a")),
              f"measured excess ({unit})": lambda r: f"{r['measured'] * k:.2f}",
-             "first alarm on target": lambda r: f"{r['localized']}/{r['runs']}"}
+             "detected": lambda r: count_ci(r["detected"], r["runs"]),
+             "first alarm on target": lambda r: count_ci(r["localized"], r["runs"])}
     return pd.DataFrame([{"metric": name, **{f"{r['magnitude'] * k:g}{label}": fn(r)
                                              for _, r in part.iterrows()}}
                          for name, fn in lines.items()])
@@ -122,14 +154,33 @@ def timeline_figures(root: Path, out: Path) -> list[Path]:
     return written
 
 
+def totals(rows: pd.DataFrame) -> pd.DataFrame:
+    """Over every run, per detector (default setting): runs, detected and first alarm on the target
+    with their 95 % intervals, false alarms over the healthy drone-hours and the rate's 95 % bound."""
+    out = []
+    for detector, g in default_rows(rows).groupby("detector", sort=False):
+        hours = float(g["healthy_drone_h"].sum())
+        alarms = int(g["false_alarms"].sum())
+        out.append({"detector": detector, "runs": len(g),
+                    "detected": count_ci(g["detected"].astype(bool).sum(), len(g)),
+                    "first alarm on target": count_ci(g["localized"].astype(bool).sum(), len(g)),
+                    "false alarms": alarms, "healthy drone-hours": f"{hours:.2f}",
+                    "false alarms per drone-hour, 95 % upper bound":
+                        f"{benchstats.poisson_rate_ci(alarms, hours)[1]:.2f}"})
+    return pd.DataFrame(out)
+
+
 def rq3_report(rows: pd.DataFrame, out: Path, root: Path) -> list[Path]:
     summary = summarize(rows)
-    written = write_table(rows, out, "rq3_runs", markdown=False) + write_table(summary, out, "rq3_summary")
-    for name, table in (("rq3_table2", table2(summary)), ("rq3_table4", network_table(summary, "latency")),
+    from_csv = root.suffix == ".csv"      # the committed rows: the input, not rewritten; no run dirs
+    written = [] if from_csv else write_table(rows, out, "rq3_runs", markdown=False)
+    written += write_table(summary, out, "rq3_summary")
+    for name, table in (("rq3_totals", totals(rows)), ("rq3_table2", table2(summary)),
+                        ("rq3_table4", network_table(summary, "latency")),
                         ("rq3_table5", network_table(summary, "packet_loss"))):
         written += write_table(table, out, name)
         print(f"## {name}\n\n{to_markdown(table)}")
-    return written + timeline_figures(root, out)
+    return written + ([] if from_csv else timeline_figures(root, out))
 
 
 def with_counts_ci(smallest: pd.DataFrame) -> pd.DataFrame:

@@ -36,7 +36,6 @@ from swarmbox.analysis.load import GROUND, read_manifest, read_table
 from swarmbox.analysis.metrics import exec_window
 from swarmbox.analysis.mission import marker_values, parse_spec
 from swarmbox.analysis.outputs import write_sweep
-from swarmbox.analysis.sweep import ranks
 from swarmbox.analysis.tables import write_table
 from swarmbox.analysis.unify import T
 
@@ -130,11 +129,21 @@ def delivery_boxplot(waits: pd.DataFrame) -> Figure:
     return fig
 
 
+def table6_ranks(summary: pd.DataFrame) -> pd.DataFrame:
+    """Per Table-6 metric, the algorithms ranked by mean (1 = best, by the metric's direction; means
+    equal to 5 significant digits tie and share the lower rank) and their mean rank; index: algo."""
+    rows = summary[summary["metric"].isin(list(TABLE6))]
+    key = rows["mean"].map(lambda v: float(f"{v:.5g}"))
+    rows = rows.assign(key=np.where(rows["direction"] == "higher", -key, key))
+    rows = rows.assign(rank=rows.groupby("metric")["key"].rank(method="min"))
+    wide = rows.pivot(index="algo", columns="metric", values="rank")
+    return wide.assign(mean_rank=wide.mean(axis=1))
+
+
 def results_table(summary: pd.DataFrame) -> pd.DataFrame:
     """Per algorithm: ``mean [95 % CI] #rank`` of each Table-6 metric, the delivered count, the mean
     rank over the eight metrics (1 = best); best mean rank first."""
-    table6 = summary[summary["metric"].isin(list(TABLE6))]
-    rank = ranks(table6, ("algo",)).set_index("group")
+    rank = table6_ranks(summary)
     rows = []
     for algo, group in summary.groupby("algo", sort=False):
         by_metric = group.set_index("metric")

@@ -11,7 +11,8 @@ missing) and writes, beside the analyzer's own outputs:
   one box per (assignment, sort), as the paper's "Delivery Time" box plot;
 - ``tables/rq4_table.{csv,md}``: per algorithm, the mean, 95 % bootstrap CI and rank (1 = best) of
   the eight Table-6 metrics, the mean delivered count and the mean rank;
-- ``tables/rq4_package_waits.{csv,md}``: the pooled per-package waits per algorithm.
+- ``tables/rq4_package_waits.{csv,md}``: the pooled per-package waits per algorithm;
+- with ``--publish``, the README's data in ``experiments/rq4_delivery/results/`` (:mod:`.publish`).
 
 Per-package waits are read from the ground's ``delivered`` markers with the analyzer's own marker
 metric (the ground clock is the analyzer's reference, so no clock correction applies).

@@ -208,14 +208,18 @@ def _evaluate_or_skip(run_dir: Path, settings: list[dg.DiagnosisOptions]) -> pd.
 def write_report(rows: pd.DataFrame, out: Path) -> list[Path]:
     """Rows, detection rates, false-alarm rates and the smallest detected magnitudes (CSV + Markdown),
     and the detection-rate and ROC figures."""
-    from swarmbox.analysis import diagnosis_plots, figures
+    # benchstats imports this module: imported here, not at the top
+    from swarmbox.analysis import benchstats, diagnosis_plots, figures
     from swarmbox.analysis.tables import write_table
 
     fa = false_alarm_rates(rows)
-    written = write_table(rows, out, "diagnosis_runs", markdown=False) + write_table(fa, out, "false_alarms")
+    written = write_table(rows, out, "diagnosis_runs", markdown=False)
+    written += write_table(benchstats.with_false_alarm_ci(fa), out, "false_alarms")
     if (rows["fault"] != "none").any():
         det = detection_rates(rows)
-        written += write_table(det, out, "detection_rates")
+        written += write_table(benchstats.with_detection_ci(det), out, "detection_rates")
+        # in-sample: the setting is chosen on the runs it is reported on (benchstats.held_out_smallest
+        # splits by seed when there are seeds to spare)
         written += write_table(smallest_detected(det, fa), out, "smallest_detected")
         chosen = (det["threshold_scale"] == 1.0) | (det["detector"] == "baseline")
         default = det[(det["rule"] != "paper") & chosen]

@@ -94,11 +94,16 @@ def test_latency_and_loss_are_found_and_recovered(run):
     assert loss["value"] >= 0.05
 
 
-def test_a_healthy_hover_raises_no_alarm(run):
+def test_a_healthy_hover_raises_no_alarm(run, tmp_path):
     _, d = run(*HOVER, "algo.params.hover_s=8")
     rows = graded(d)
     assert rows.loc["swarmbox", "alarms"] == 0 and rows.loc["swarmbox", "false_alarms"] == 0
     assert rows.loc["swarmbox", "fault"] == "none" and rows.loc["swarmbox", "healthy_drone_h"] > 0
+    # the report's false-alarm table carries the exact Poisson bound: 0 alarms in h hours -> ln(40) / h
+    detection.write_report(rows.reset_index(), tmp_path / "report")
+    fa = pd.read_csv(tmp_path / "report" / "false_alarms.csv").set_index("detector")
+    hours = rows.loc["swarmbox", "healthy_drone_h"]
+    assert fa.loc["swarmbox", "fa_ci_high"] == pytest.approx(np.log(40) / hours)
 
 
 @pytest.mark.slow

@@ -246,7 +246,8 @@ def regressed(verdicts: pd.DataFrame) -> list[str]:
     """Names of the metrics with a regression verdict, run counts first."""
     names = verdicts.loc[verdicts["verdict"].isin(REGRESSIONS), "metric"] if len(verdicts) else []
     unique = list(dict.fromkeys(names))
-    return sorted(unique, key=lambda m: (m not in RUN_COUNTS, unique.index(m)))
+    order = list(RUN_COUNTS)
+    return sorted(unique, key=lambda m: order.index(m) if m in RUN_COUNTS else len(order) + unique.index(m))
 
 
 def has_regression(verdicts: pd.DataFrame) -> bool:

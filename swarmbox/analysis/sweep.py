@@ -50,7 +50,7 @@ from swarmbox.analysis.identity import (
     not_comparable,
     run_identity,
 )
-from swarmbox.analysis.load import RunLoadError, find_runs, find_unfinished, load_run
+from swarmbox.analysis.load import RunLoadError, find_runs, find_unfinished, load_run, read_manifest
 from swarmbox.analysis.parallel import map_runs
 from swarmbox.analysis.report import SCALAR_COLUMNS, AnalysisOptions, analyze_run
 
@@ -175,6 +175,7 @@ def analyze_sweep(root: str | Path, opts: SweepOptions | None = None, workers: i
     identity and seed (nothing is tabulated from such a sweep).
     """
     opts = opts or SweepOptions()
+    _refuse_duplicates(Path(root))
     runs, problems, directions, identity, units = collect_runs(Path(root), opts.run, workers, progress)
     empty = pd.DataFrame()
     if runs.empty:
@@ -194,6 +195,22 @@ def analyze_sweep(root: str | Path, opts: SweepOptions | None = None, workers: i
     ranked = groupstats.ranks(summary, d, warnings)
     return SweepResult(runs, problems, summary, compared, ranked, directions, identity, d.keys, d, units,
                        warnings)
+
+
+def _refuse_duplicates(root: Path) -> None:
+    """Two runs with the same identity and seed, found from the manifests before any run is analyzed."""
+    rows = []
+    for run_dir in find_runs(root):
+        try:
+            manifest = read_manifest(run_dir)
+        except RunLoadError:
+            continue          # reported as skipped by the analysis
+        rel = str(run_dir.relative_to(root)) if run_dir != root else "."
+        rows.append({"run": rel, "seed": manifest.get("seed"), **run_identity(manifest)})
+    frame = pd.DataFrame(rows)
+    if len(frame) > 1:
+        identity = tuple(c for c in frame.columns if c not in ("run", "seed"))
+        check_unique(frame.fillna({c: DEFAULT for c in identity}), identity)
 
 
 Triple = tuple[str, str, str]

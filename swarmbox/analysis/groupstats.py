@@ -188,6 +188,9 @@ def paired(runs: pd.DataFrame, metrics: list[str], d: Design, pairs: list[tuple[
              "note": f"no pair: no run of {a} and run of {b} with the same seed both have values"}]
         rows += [{c: inside[c].iloc[0] for c in d.strata} | r for r in found]
     rows += [{"a": a, "b": b, "metric": "", "n_pairs": 0, "note": why} for a, b, why in not_comparable]
+    if not rows:
+        only = ", ".join(sorted(group.unique())) or "none"
+        rows = [{"metric": "", "n_pairs": 0, "note": f"one group per stratum ({only}): nothing to pair"}]
     return pd.DataFrame(rows, columns=[*d.strata, *PAIRED_COLUMNS])
 
 

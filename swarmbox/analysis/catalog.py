@@ -90,6 +90,8 @@ def direction_of(name: str, extra: dict[str, Direction] | None = None) -> Direct
         return extra[name]
     if name in BUILTIN:
         return BUILTIN[name].direction
+    if name in RUN_COUNTS:
+        return RUN_COUNTS[name]
     for suffix, direction in _DIAG_SUFFIX.items():
         if name.endswith(suffix):
             return direction

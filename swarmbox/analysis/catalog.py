@@ -67,6 +67,10 @@ BUILTIN: dict[str, MetricInfo] = {
 #: but never rank, compare or colour them as results.
 MACHINE_METRICS = frozenset({"wall_time_s", "real_time_factor"})
 
+#: Unit of each injected fault's magnitude (the detection benchmark's x axis).
+FAULT_UNITS: dict[str, str] = {"gps_drift": "m/s", "gps_bias": "m", "gps_noise": "x sigma", "latency": "ms",
+                               "packet_loss": "loss probability", "burst_loss": "p_enter"}
+
 #: A sweep summary's run counts (rows of every group) and which direction is better.
 RUN_COUNTS: dict[str, Direction] = {
     "runs_attempted": "higher", "runs_ok": "higher", "runs_aborted": "lower", "runs_failed": "lower",

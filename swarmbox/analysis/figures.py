@@ -7,6 +7,7 @@ render with the Agg canvas whatever backend the caller has set, and nothing leak
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -137,8 +138,15 @@ def heatmap(summary: pd.DataFrame, *, group_by: tuple[str, ...] = ("algo",), met
     ax.set_ylabel("")
     ax.tick_params(axis="x", labelrotation=30)
     within = f"; compared within {'/'.join(strata)}" if strata else ""
-    ax.set_title(f"Mean per {'/'.join(keys)}; white = best{within}", wrap=True)
+    values = summary.loc[summary["metric"].isin(means.index), "n"]
+    title = f"Mean per {'/'.join(keys)} (n per mean: {_n_range(values)}); white = best{within}"
+    ax.set_title(_wrapped(title, fig, 12.0))
     return fig
+
+
+def _n_range(n: pd.Series) -> str:
+    lo, hi = int(n.min()), int(n.max())
+    return f"{lo}" if lo == hi else f"{lo}-{hi}"
 
 
 def _annot(mean: float, n: float, ok: int | None) -> str:
@@ -198,9 +206,16 @@ def boxplots(runs: pd.DataFrame, *, metrics: list[str], by: str = "algo", units:
     if constant:
         same = ", ".join(f"{m} = {runs[m].dropna().iloc[0]:.3g}" if runs[m].notna().any() else f"{m}: no data"
                          for m in constant)
-        title += f"\nthe same in every run, not drawn: {same}"
-    fig.suptitle(title)
+        title += f". The same in every run, not drawn: {same}"
+    fig.suptitle(_wrapped(title, fig), fontsize="medium")
     return fig
+
+
+def _wrapped(text: str, fig: Figure, points: float = 10.0) -> str:
+    """``text`` broken into lines that fit the figure's width (about 0.55 em a character), so that a
+    title is never cut at the figure's edge."""
+    per_line = max(20, int(fig.get_figwidth() * 72 / (0.55 * points)) - 4)
+    return "\n".join(textwrap.wrap(text, per_line, break_long_words=True))
 
 
 def _track(rows: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, str]:

@@ -5,7 +5,7 @@ import pandas as pd
 import pytest
 
 from swarmbox.analysis.cli import compare_main
-from swarmbox.analysis.compare import Tolerance, compare, load_config, verdict
+from swarmbox.analysis.compare import NO_COMMON_ROW, Tolerance, compare, load_config, verdict
 
 BASE = pd.DataFrame({"algo": ["a", "a", "a", "a"],
                      "metric": ["sim_time_s", "busy_s_mean", "min_separation_m", "mission_duration_s"],
@@ -88,18 +88,21 @@ def test_tables_with_no_row_in_common_are_refused_in_one_line(tmp_path, capsys):
     other = write(tmp_path, "other/summary.csv", BASE.assign(algo="b"))
     assert compare_main([str(base), str(other)]) == 2
     captured = capsys.readouterr()
-    assert captured.err.strip() == "error: no (group, metric) in common — is this the baseline for this sweep?"
+    assert captured.err.strip() == f"error: {NO_COMMON_ROW}"
+    assert NO_COMMON_ROW == "no (group, metric) in common — is this the baseline for this sweep?"
     assert "REGRESSION" not in captured.out
 
 
 def test_run_counts_and_fewer_values_are_regressions(tmp_path, capsys):
-    counts = pd.DataFrame({"algo": "a", "metric": ["runs_attempted", "runs_ok", "runs_failed", "success_rate"],
-                           "n": 20, "mean": [20.0, 20.0, 0.0, 1.0], "direction": ""})
+    names = ["runs_attempted", "runs_ok", "runs_failed", "success_rate"]
+    counts = pd.DataFrame({"algo": "a", "metric": names, "n": 20, "mean": [20.0, 20.0, 0.0, 1.0],
+                           "direction": ""})
     base = pd.concat([counts, BASE.assign(n=20)])
     cur = pd.concat([counts.assign(mean=[20.0, 19.0, 1.0, 0.95]), BASE.assign(n=20)])
     base_p, cur_p = write(tmp_path, "b/summary.csv", base), write(tmp_path, "c/summary.csv", cur)
     assert compare_main([str(base_p), str(cur_p)]) == 1       # one run of twenty lost
-    assert capsys.readouterr().out.strip().splitlines()[-1] == "REGRESSION: runs_ok, runs_failed, success_rate"
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last == "REGRESSION: runs_ok, runs_failed, success_rate"
     fewer = pd.concat([counts, BASE.assign(n=[20, 20, 20, 12])])
     assert compare_main([str(base_p), str(write(tmp_path, "f/summary.csv", fewer))]) == 1
     assert "REGRESSION: mission_duration_s" in capsys.readouterr().out

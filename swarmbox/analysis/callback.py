@@ -7,6 +7,7 @@
         analyze:
           _target_: swarmbox.analysis.callback.AnalyzeSweepCallback
           group_by: null        # the compared factor; null: algo if it varies, else every swept key
+          tasks: null           # aggregates across tasks (e.g. [seed]: a dataset per seed); null: the strata
 
 Hydra builds its callbacks in the process that then runs the jobs, so this module imports the
 analysis library (pandas, matplotlib) only in ``on_multirun_end``: runs never load it, and the runtime
@@ -34,8 +35,10 @@ class AnalyzeSweepCallback(Callback):
     """Runs the sweep analysis on ``config.hydra.sweep.dir`` in ``on_multirun_end``."""
 
     def __init__(self, group_by: Sequence[str] | None = None, n_boot: int = 2000, seed: int = 0,
-                 figures: bool = True, workers: int | None = None) -> None:
+                 figures: bool = True, workers: int | None = None,
+                 tasks: Sequence[str] | None = None) -> None:
         self.group_by = tuple(group_by) if group_by else None
+        self.tasks = tuple(tasks) if tasks else None
         self.n_boot, self.seed = n_boot, seed
         self.figures, self.workers = figures, workers
 
@@ -56,7 +59,8 @@ class AnalyzeSweepCallback(Callback):
             from swarmbox.analysis.parallel import Reporter
             from swarmbox.analysis.sweep import SweepInputError, SweepOptions, analyze_sweep
 
-            options = SweepOptions(group_by=self.group_by, n_boot=self.n_boot, seed=self.seed)
+            options = SweepOptions(group_by=self.group_by, n_boot=self.n_boot, seed=self.seed,
+                                   tasks=self.tasks)
             sweep_dir = Path(str(config.hydra.sweep.dir))
             try:
                 result = analyze_sweep(sweep_dir, options, workers=self._workers(),

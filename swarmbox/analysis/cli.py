@@ -47,6 +47,9 @@ def _analyze_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--group-by", nargs="+",
                        help="the compared factor: any choice or override key, e.g. algo or network.loss_prob "
                             "(default: algo if it varies, else every swept key)")
+    sweep.add_argument("--tasks", nargs="+",
+                       help="what a task is for the aggregates across tasks (IQM, P(improvement), profiles): "
+                            "keys or seed (default: the other swept keys, e.g. mission)")
     sweep.add_argument("--pair", nargs=2, action="append", metavar=("A", "B"),
                        help="paired comparison B - A (repeatable; default: every pair of groups)")
     sweep.add_argument("--statuses", nargs="+", default=["ok"], help="run statuses summarized (ok)")
@@ -117,7 +120,8 @@ def _analyze_sweep(path: Path, out: Path, args: argparse.Namespace) -> int:
     opts = SweepOptions(group_by=tuple(args.group_by) if args.group_by else None,
                         statuses=tuple(args.statuses),
                         n_boot=args.n_boot, ci=args.ci, seed=args.seed,
-                        pairs=tuple(map(tuple, args.pair)) if args.pair else None, run=_run_options(args))
+                        pairs=tuple(map(tuple, args.pair)) if args.pair else None,
+                        tasks=tuple(args.tasks) if args.tasks else None, run=_run_options(args))
     try:
         result = analyze_sweep(path, opts, workers=args.workers, progress=Reporter("analysis"))
     except SweepInputError as exc:

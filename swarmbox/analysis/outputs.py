@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from swarmbox.analysis import figures
+from swarmbox.analysis import aggregate_plots, figures
 from swarmbox.analysis.catalog import declared_units, direction_of, unit_of
 from swarmbox.analysis.report import RunAnalysis
 from swarmbox.analysis.sweep import SweepResult, summary_wide
@@ -115,12 +115,29 @@ def write_sweep(result: SweepResult, out: Path, with_figures: bool = True,
     written += write_table(summary_wide(result.summary, result.group_by), tables, "summary_wide")
     written += write_table(result.paired, tables, "paired")
     written += write_table(result.ranks, tables, "ranks")
+    if result.aggregates is not None:
+        written += _aggregate_outputs(result, out, with_figures, metrics)
     if with_figures:
         chosen = figure_metrics(result, metrics)
         try:
             written += _sweep_figures(result, out / "figures", chosen)
         except (ValueError, KeyError) as exc:
             log.warning("sweep figures skipped: %s", exc)
+    return written
+
+
+def _aggregate_outputs(result: SweepResult, out: Path, with_figures: bool,
+                       metrics: list[str] | None) -> list[Path]:
+    agg = result.aggregates
+    written = write_table(agg.iqm, out / "tables", "aggregate_iqm")
+    written += write_table(agg.improvement, out / "tables", "aggregate_improvement")
+    written += write_table(agg.profiles, out / "tables", "aggregate_profiles", markdown=False)
+    if with_figures and len(agg.iqm):
+        chosen = [m for m in figure_metrics(result, metrics) if (agg.iqm["metric"] == m).any()]
+        compared = "/".join(result.design.group_by) if result.design else "group"
+        fig = aggregate_plots.aggregates(agg.iqm, agg.profiles, metrics=chosen or None,
+                                         tasks="/".join(agg.tasks), units=result.units, compared=compared)
+        written += figures.save(fig, out / "figures", "aggregate")
     return written
 
 

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from swarmbox.analysis import groupstats
+from swarmbox.analysis import aggregate, groupstats
 from swarmbox.analysis.catalog import MACHINE_METRICS, Direction, declared_units
 from swarmbox.analysis.groupstats import (  # noqa: F401 - the sweep API re-exports them
     MIN_N_CI,
@@ -69,6 +69,9 @@ class SweepOptions:
     ci: float = 0.95
     seed: int = 0
     pairs: tuple[tuple[str, str], ...] | None = None   # None: every pair of groups
+    #: what a task is for the aggregates across tasks (IQM, P(improvement), profiles): identity keys or
+    #: "seed" (a dataset per seed, as in RQ4); None: the strata (e.g. the mission), when there are any
+    tasks: tuple[str, ...] | None = None
     run: AnalysisOptions = field(default_factory=AnalysisOptions)
 
 
@@ -85,6 +88,7 @@ class SweepResult:
     design: Design | None = None
     units: dict[str, str] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)   # groups that are not comparable, and why
+    aggregates: Aggregates | None = None                # across tasks, when a sweep has several
 
     def metric_columns(self) -> list[str]:
         return metric_columns(self.runs, self.choice_columns)
@@ -194,7 +198,7 @@ def analyze_sweep(root: str | Path, opts: SweepOptions | None = None, workers: i
                                  opts.ci)
     ranked = groupstats.ranks(summary, d, warnings)
     return SweepResult(runs, problems, summary, compared, ranked, directions, identity, d.keys, d, units,
-                       warnings)
+                       warnings, across_tasks(runs, summary, d, opts))
 
 
 def _refuse_duplicates(root: Path) -> None:
@@ -211,6 +215,36 @@ def _refuse_duplicates(root: Path) -> None:
     if len(frame) > 1:
         identity = tuple(c for c in frame.columns if c not in ("run", "seed"))
         check_unique(frame.fillna({c: DEFAULT for c in identity}), identity)
+
+
+@dataclass
+class Aggregates:
+    """Per-algorithm aggregates across tasks (:mod:`swarmbox.analysis.aggregate`)."""
+
+    tasks: tuple[str, ...]
+    iqm: pd.DataFrame
+    improvement: pd.DataFrame
+    profiles: pd.DataFrame
+
+
+def across_tasks(runs: pd.DataFrame, summary: pd.DataFrame, d: Design,
+                 opts: SweepOptions) -> Aggregates | None:
+    """IQM, P(improvement) and performance profiles of the compared groups over the tasks, when there
+    are at least two groups and two tasks; None otherwise."""
+    tasks = opts.tasks if opts.tasks is not None else d.strata
+    unknown = [t for t in tasks if t not in runs.columns]
+    if unknown:
+        raise SweepInputError(f"task key(s) {unknown} are not among the runs' seed, choices and overrides")
+    if not tasks:
+        return None
+    frame = runs.assign(_algorithm=labels(runs, d.group_by), _task=labels(runs, tasks))
+    if frame["_algorithm"].nunique() < 2 or frame["_task"].nunique() < 2:
+        return None
+    directed = summary[summary["kind"].eq("metric") & summary["direction"].isin(["lower", "higher"])]
+    metrics = dict(zip(directed["metric"], directed["direction"], strict=False))
+    iqm, improvement, profiles = aggregate.aggregate(frame, metrics, "_algorithm", "_task", opts.seed,
+                                                     opts.n_boot, opts.ci)
+    return Aggregates(tuple(tasks), iqm, improvement, profiles)
 
 
 Triple = tuple[str, str, str]

@@ -214,7 +214,8 @@ def compare(baseline: pd.DataFrame, current: pd.DataFrame, config: CompareConfig
     """
     keys = key_columns(baseline)
     if set(keys) != set(key_columns(current)):
-        raise CompareInputError(f"key columns differ: baseline {keys}, current {key_columns(current)}")
+        raise CompareInputError(f"{NO_COMMON_ROW} (the baseline's groups are keyed by {keys}, the current "
+                                f"table's by {key_columns(current)})")
     counts = ["n"] if "n" in baseline and "n" in current else []
     base = baseline[[*keys, "metric", "value", *counts] + (["direction"] if "direction" in baseline else [])]
     merged = base.merge(current[[*keys, "metric", "value", *counts]], on=[*keys, "metric"], how="outer",

@@ -91,6 +91,10 @@ def test_tables_with_no_row_in_common_are_refused_in_one_line(tmp_path, capsys):
     assert captured.err.strip() == f"error: {NO_COMMON_ROW}"
     assert NO_COMMON_ROW == "no (group, metric) in common — is this the baseline for this sweep?"
     assert "REGRESSION" not in captured.out
+    keyed = write(tmp_path, "keyed/summary.csv", BASE.assign(mission="m"))     # another sweep's design
+    assert compare_main([str(base), str(keyed)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {NO_COMMON_ROW} (") and "'mission'" in err[0]
 
 
 def test_run_counts_and_fewer_values_are_regressions(tmp_path, capsys):

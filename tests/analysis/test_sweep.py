@@ -116,3 +116,21 @@ def test_bad_runs_are_reported_skipped_and_counted(sweep_dir, tmp_path):
 def test_group_by_unknown_column_is_refused(sweep_dir):
     with pytest.raises(sweep.SweepInputError, match="planner"):
         analyze_sweep(sweep_dir, SweepOptions(group_by=("planner",), n_boot=10))
+
+
+def test_an_abort_never_enters_a_mission_window_metric(sweep_dir, tmp_path):
+    """Even when aborted runs are asked for, their shortened mission window is not a fast mission."""
+    root = tmp_path / "sweep"
+    shutil.copytree(sweep_dir, root)
+    fast = json.loads((root / "0" / "run.json").read_text())
+    short = Scenario(ticks=400, seed=9, ground_stages={1: 0, 2: 20, 3: 40, 4: 60, 5: 390},
+                     choices={"algo": "fast", "mission": "synthetic"})     # EXECUTION 0.5 s: an early end
+    build_run(root / "aborted", short)
+    (root / "aborted" / "run.json").write_text(json.dumps(fast | {"status": "aborted", "seed": 9}))
+    s = analyze_sweep(root, SweepOptions(statuses=("ok", "aborted"), n_boot=50)).summary
+    s = s.set_index(["algo", "metric"])
+    assert s.loc[("fast", "mission_duration_s"), "n"] == 5          # the aborted run is not in it
+    assert s.loc[("fast", "mission_duration_s"), "mean"] == pytest.approx(np.mean(
+        [(300 + 8 * seed - 40) * 0.025 for seed in range(5)]))
+    assert s.loc[("fast", "min_separation_m"), "n"] == 6            # asked for: other metrics include it
+    assert s.loc[("fast", "runs_aborted"), "mean"] == 1 and s.loc[("fast", "success_rate"), "mean"] == 5 / 6

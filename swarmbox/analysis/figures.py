@@ -122,11 +122,7 @@ def heatmap(summary: pd.DataFrame, *, group_by: tuple[str, ...] = ("algo",), met
         ax.set_axis_off()
         return fig
     runs = _group_runs(summary, keys)
-    n = summary.assign(group=summary[keys].astype("str").agg("/".join, axis=1) if keys else "all")
-    n = n.pivot_table(index="metric", columns="group", values="n", aggfunc="first").reindex_like(means)
-    ok = {g: int(t.split("/")[0]) for g, t in runs.items()}
-    cells = pd.DataFrame([[_annot(means.iloc[i, j], n.iloc[i, j], ok.get(g))
-                           for j, g in enumerate(means.columns)] for i in range(len(means))])
+    cells = _cells(summary, keys, means, {g: int(t.split("/")[0]) for g, t in runs.items()})
     vmax = float(np.clip(np.nanmax(gap.to_numpy(dtype="float64"), initial=0.0), 0.1, 1.0))
     sns.heatmap(100 * gap.astype("float64"), ax=ax, cmap="OrRd", vmin=0, vmax=100 * vmax,
                 annot=cells.to_numpy(), fmt="", linewidths=0.5, linecolor="white",
@@ -147,6 +143,14 @@ def heatmap(summary: pd.DataFrame, *, group_by: tuple[str, ...] = ("algo",), met
 def _n_range(n: pd.Series) -> str:
     lo, hi = int(n.min()), int(n.max())
     return f"{lo}" if lo == hi else f"{lo}-{hi}"
+
+
+def _cells(summary: pd.DataFrame, keys: list[str], means: pd.DataFrame, ok: dict[str, int]) -> pd.DataFrame:
+    """Cell texts (metric x group): the mean, and its n where it is below the group's ok runs."""
+    n = summary.assign(group=summary[keys].astype("str").agg("/".join, axis=1) if keys else "all")
+    n = n.pivot_table(index="metric", columns="group", values="n", aggfunc="first").reindex_like(means)
+    return pd.DataFrame([[_annot(means.iloc[i, j], n.iloc[i, j], ok.get(g))
+                          for j, g in enumerate(means.columns)] for i in range(len(means))])
 
 
 def _annot(mean: float, n: float, ok: int | None) -> str:

@@ -90,3 +90,15 @@ def test_a_sweep_over_tasks_writes_the_aggregates(two_levels):
     p = improve.set_index(["metric", "x", "y"])["p_improvement"]
     assert p[("mission_duration_s", "1", "2")] == 1.0
     assert (two_levels / "figures" / "aggregate.png").is_file() and (tables / "aggregate_iqm.md").is_file()
+
+
+def test_each_seed_as_a_dataset_and_an_unknown_task_key(two_levels, tmp_path, capsys):
+    """The RQ4 presets' ``tasks: [seed]``: a task per seed."""
+    out = tmp_path / "by_seed"
+    assert analyze_main([str(two_levels), "--group-by", "algo.params.hover_s", "--tasks", "seed",
+                         "--out", str(out), "--no-figures", "--workers", "1", "--n-boot", "50"]) == 0
+    iqm = pd.read_csv(out / "tables" / "aggregate_iqm.csv")
+    assert set(iqm["n_tasks"]) == {2} and set(iqm["n_runs"]) == {4}     # seeds 0, 1; two networks each
+    assert analyze_main([str(two_levels), "--tasks", "dataset", "--out", str(tmp_path / "x"),
+                         "--workers", "1"]) == 2
+    assert "dataset" in capsys.readouterr().err and not (tmp_path / "x").exists()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import subprocess
+from collections.abc import Mapping
 
 
 class ProcessSet:
@@ -33,3 +34,9 @@ class ProcessSet:
                 self._reported.add(i)
                 out.append((i, int(proc.returncode)))
         return out
+
+
+def without_keys(env: Mapping[str, str]) -> dict[str, str]:
+    """``env`` without SwarmBox's key variables (``SWARMBOX_*_KEY``): a vehicle or helper process
+    is handed only the key it needs, explicitly, never the swarm key its parent may hold."""
+    return {k: v for k, v in env.items() if not (k.startswith("SWARMBOX_") and k.endswith("_KEY"))}

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from swarmbox.hal.launch import ProcessSet
+from swarmbox.hal.launch import ProcessSet, without_keys
 from swarmbox.hal.mavlink.frames import GeoFrame
 from swarmbox.hal.px4.params import BootClock, Px4Params
 
@@ -191,7 +191,8 @@ class SitlLauncher(ProcessSet):
         for i, home in enumerate(self.homes):
             wd = self.instance_dir(i)
             wd.mkdir(parents=True, exist_ok=True)
-            env = instance_env(self.frame.geodetic_of(home), self.options, self.speed, os.environ)
+            env = instance_env(self.frame.geodetic_of(home), self.options, self.speed,
+                               without_keys(os.environ))
             cmd = [str(self.binary), "-i", str(self.instance(i)), "-d", str(self.build / "etc")]
             with open(wd / "out.log", "wb") as out, open(wd / "err.log", "wb") as err:
                 self.procs.append(subprocess.Popen(cmd, cwd=wd, env=env, stdin=subprocess.DEVNULL, stdout=out,

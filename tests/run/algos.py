@@ -86,3 +86,16 @@ class SlowDrone(DroneAlgorithm):
 
     def exec_complete(self, ctx):
         return ctx.stage_time_s > ctx.params.get("hover_s", 5.0)
+
+
+class OneCrashingDrone(DroneAlgorithm):
+    """Drone 1 raises 1 s into EXECUTION; the others hover ``params.hover_s`` and complete."""
+
+    def exec_loop(self, ctx):
+        if ctx.id == 1 and ctx.stage_time_s > 1.0:
+            raise ZeroDivisionError("deliberate failure in drone 1's exec_loop")
+        n, e, _ = ctx.home_ned_m
+        return Setpoint.position(n, e, -2.0)
+
+    def exec_complete(self, ctx):
+        return ctx.stage_time_s > ctx.params.get("hover_s", 5.0)

@@ -140,6 +140,15 @@ def _scrub(value: Any, keys: list[str]) -> Any:
     return value
 
 
+def scrub_error(text: str, overrides: Iterable[str]) -> str:
+    """An error message fit to print: every known secret hidden, and no override value echoed back
+    by Hydra's "append" hint (a misspelt key's value may be a key: ``+run.net.kye=...``)."""
+    import re
+
+    text = scrub(text, secret_values(overrides=overrides))
+    return re.sub(r"(To append to your config use \+[^=\s]+)=[^\s;]+", r"\1=...", text)
+
+
 def public_config(cfg: DictConfig) -> dict[str, Any]:
     """The resolved config as plain data, every secret value replaced by None (keys travel in the
     environment of the processes that need them, never in a file)."""
@@ -196,6 +205,37 @@ def child_env(keep: Mapping[str, str] | None = None, key_env: str | None = None)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(_PROJECT_ROOT), env.get("PYTHONPATH")]))
     env.update(keep or {})
     return env
+
+
+def hide_in_config(config: DictConfig) -> set[str]:
+    """Hide every secret of a composed Hydra config in place — the task overrides, the override
+    dir name, the secret keys' values — and in every later log message of this process; returns
+    the secrets. For the master config of a sweep, which Hydra saves as ``multirun.yaml`` (each job
+    composes its own config from its overrides, so nothing it runs with is changed)."""
+    from omegaconf import flag_override
+
+    overrides = list(OmegaConf.select(config, "hydra.overrides.task", default=None) or [])
+    secrets = secret_values(config, overrides)
+    scrub_logging(secrets)
+    with flag_override(config, ["struct", "readonly"], [False, False]):
+        if overrides:
+            config.hydra.overrides.task = redact_overrides(overrides)
+        dirname = OmegaConf.select(config, "hydra.job.override_dirname", default=None)
+        if isinstance(dirname, str):
+            config.hydra.job.override_dirname = scrub(dirname, secrets)
+        for path in _secret_paths(OmegaConf.to_container(config, resolve=False)):
+            OmegaConf.update(config, path, None, merge=False)
+    return secrets
+
+
+def _secret_paths(node: Any, prefix: str = "") -> Iterable[str]:
+    if isinstance(node, dict):
+        for k, v in node.items():
+            path = f"{prefix}{k}"
+            if is_secret(str(k)) and v not in (None, "") and not isinstance(v, dict | list):
+                yield path
+            else:
+                yield from _secret_paths(v, path + ".")
 
 
 # -- the manifest --------------------------------------------------------------------------------

@@ -10,6 +10,7 @@ once complete, so a reader never sees half a file under its final name.
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -124,6 +125,7 @@ def split(spill: SpillFile, tails: Mapping[str, Chunk], root: Path,
     written (``<node>/<table>.parquet``) and what went wrong."""
     errors: list[str] = []
     failed: list[str] = []
+    causes: dict[str, list[str]] = {}   # cause -> the files it cost
     with ThreadPoolExecutor(max_workers=2) as pool:
         for table in TABLES:
             owners = [node for node, tables in nodes.items() if table in tables]
@@ -142,12 +144,16 @@ def split(spill: SpillFile, tails: Mapping[str, Chunk], root: Path,
             for name, job in jobs.items():
                 if (exc := job.exception()) is not None:
                     failed.append(name)
-                    errors.append(f"{name}: {_why(exc)}")
+                    causes.setdefault(_why(exc), []).append(name)
+    errors += [f"{', '.join(names)} not written: {why}" for why, names in causes.items()]
     return failed, errors
 
 
 def _why(exc: BaseException) -> str:
-    return exc.strerror if isinstance(exc, OSError) and exc.strerror else f"{type(exc).__name__}: {exc}"
+    """The cause in a few words: ``No space left on device``, ``File too large``."""
+    text = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+    found = re.search(r"\[errno \d+\] (.+)", text)
+    return found.group(1).strip() if found else f"{type(exc).__name__}: {text}"
 
 
 def _buffered(chunk: Chunk, pieces: dict[int, list[pa.Table]]) -> None:

@@ -22,6 +22,7 @@ from omegaconf import DictConfig
 
 from swarmbox import monitor as live_monitor
 from swarmbox.core.messages import GROUND_ID
+from swarmbox.core.rows import TEXTS
 from swarmbox.core.swarm import Swarm, gc_paused
 from swarmbox.faults import FaultConfigError, describe
 from swarmbox.record.schema import node_name
@@ -101,6 +102,7 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
     swarm = progress = monitor = dog = None
     discard = False
     started = time.perf_counter()
+    refused_texts = TEXTS.overflowed
     try:
         with interrupt.armed():
             try:
@@ -149,6 +151,10 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         _stop_watchers(manifest, dog, progress, monitor, swarm)
         if manifest["status"] in ("failed", "interrupted"):
             _reached(manifest, swarm, started)
+        if TEXTS.overflowed > refused_texts:
+            manifest["problems"].append(
+                f"{TEXTS.overflowed - refused_texts} texts logged as {TEXTS.OVERFLOW!r}: the text table "
+                f"holds {TEXTS.limit} texts")
         if not discard:
             try:
                 _close(manifest, swarm, recorder, run_json)

@@ -127,10 +127,11 @@ class MavsimLauncher(ProcessSet):
                 proc.kill()
                 proc.wait(timeout=STOP_TIMEOUT_S)
 
-    def collect(self, run_dir: Path | None, clocks: list[BootClock]) -> None:
+    def collect(self, run_dir: Path | None, clocks: list[BootClock]) -> list[str]:
         """mavsim keeps no flight log of its own; its console output stays in ``mavsim/``."""
         if self._own_dir:
             shutil.rmtree(self.log_dir, ignore_errors=True)
+        return []
 
 
 def _refusals(refuse: Mapping[Any, Sequence[str]], n: int) -> dict[str, tuple[str, ...]]:

@@ -28,7 +28,7 @@ from swarmbox import monitor
 from swarmbox.core.messages import GROUND_ID
 from swarmbox.hal.mavlink.signing import KEY_ENV
 from swarmbox.record.schema import node_name
-from swarmbox.run import build, claims, mission, node_faults, record, vehicle_host
+from swarmbox.run import build, claims, interrupt, mission, node_faults, record, vehicle_host
 from swarmbox.run.record import node_outcome, redact_overrides
 
 #: The MAVLink 2 signing key of the vehicle links (``backend.signing_key``), handed to agent processes.
@@ -262,18 +262,22 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
             host_keys = {k: v for k, v in keys.items() if k == MAVLINK_KEY_ENV}
             host_env = child_env(host_keys, str(cfg.run.net.key_env))
             sitl, vehicles = vehicle_host.start(cfg, m, run_dir, host_env)
-        nodes.start(keys, vehicles)
-        nodes.wait_ready(float(cfg.run.net.ready_timeout_s))
-        start = nodes.go(float(cfg.run.net.start_delay_s))
-        nodes.wait_ground()
-        nodes.finish_agents(float(cfg.run.net.stop_timeout_s))
+        with interrupt.armed():   # Ctrl-C / SIGTERM: every node is stopped, the run is interrupted
+            nodes.start(keys, vehicles)
+            nodes.wait_ready(float(cfg.run.net.ready_timeout_s))
+            start = nodes.go(float(cfg.run.net.start_delay_s))
+            nodes.wait_ground()
+            nodes.finish_agents(float(cfg.run.net.stop_timeout_s))
         results = nodes.results()
         status, reason = outcome(results)
         g = results[node_name(GROUND_ID)]
         manifest.update(status=status, reason=reason, node_results=results, ticks=g.get("ticks", 0),
                         sim_time_s=g.get("sim_time_s", 0.0))
-    except KeyboardInterrupt:
-        manifest.update(status="interrupted", reason="interrupted (Ctrl-C)")
+    except interrupt.RunInterrupted as exc:
+        manifest.update(status="interrupted", reason=str(exc))
+    except KeyboardInterrupt:   # no handler installed (programmatic use): record, then propagate
+        manifest.update(status="interrupted", reason="interrupted by SIGINT")
+        raise
     except Exception as exc:
         manifest.update(status="failed", reason=f"{type(exc).__name__}: {exc}")
     finally:
@@ -289,6 +293,9 @@ def _finish(manifest: dict[str, Any], nodes: NodeSet | None, sitl: Any, start: f
         if nodes is not None:
             nodes.stop()
             manifest["node_results"] = manifest["node_results"] or nodes.results()
+            g = manifest["node_results"].get(node_name(GROUND_ID), {})
+            if not manifest["ticks"]:   # stopped early: how far the ground got
+                manifest.update(ticks=g.get("ticks", 0), sim_time_s=g.get("sim_time_s", 0.0))
         if sitl is not None:
             sitl.stop()
             if getattr(sitl, "stats", None):

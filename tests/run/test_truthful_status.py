@@ -50,3 +50,32 @@ def test_when_the_leader_aborts_the_mission_goes_on_under_the_ground(run):
         done = table(d, f"drone_{follower}", "events").query("name == 'exec_complete'")["t_s"]
         assert len(done) == 1 and 5.0 < done.iloc[0] < ground["LANDING"]
         assert list(table(d, f"drone_{follower}", "stages")["name"])[-1] == "TERMINATION"
+
+
+def test_ctrl_c_ends_a_processes_run_interrupted_as_in_one_process(tmp_path):
+    import signal
+    import time
+
+    env = {k: v for k, v in os.environ.items() if k != "SWARMBOX_NET_KEY"}
+    env["PYTHONPATH"] = str(ROOT)
+    run_dir = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-m", "swarmbox.run", "run.runtime=processes", "backend=mavsim",
+                             "algo=hover", "mission=hover", "algo.params.hover_s=60",
+                             f"run.out_dir={run_dir}", "run.progress=false"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env)
+    try:
+        deadline = time.monotonic() + 300
+        while not (run_dir / "nodes" / "start.json").exists():
+            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+            time.sleep(0.1)
+        time.sleep(3.0)
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, out
+    manifest = json.loads((run_dir / "run.json").read_text())
+    assert manifest["status"] == "interrupted" and manifest["reason"] == "interrupted by SIGINT"
+    assert manifest["sim_time_s"] > 1.0
+    assert {r["status"] for r in manifest["node_results"].values()} == {"aborted"}   # stopped, logs closed
+    assert all((run_dir / "logs" / f"drone_{i}" / "state.parquet").is_file() for i in range(4))

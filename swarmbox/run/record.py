@@ -320,6 +320,7 @@ class RunJson:
     def write(self, manifest: dict[str, Any]) -> None:
         """Write the record (secrets hidden) into the reserved space, then rename it into place."""
         clean = scrub(manifest, self.secrets)
+        manifest.update(clean)   # what the caller prints of it hides them too
         try:
             self._put(json.dumps(clean, indent=2, sort_keys=True, default=str))
         except OSError as exc:   # bigger than the space left: the record without its bulk

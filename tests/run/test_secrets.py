@@ -37,11 +37,15 @@ def leaks(root: Path, *texts: str) -> list[str]:
 
 
 def test_a_sweep_and_a_run_write_and_print_no_key(tmp_path):
-    sweep = swarmbox("-m", "algo=hover", "mission=hover", "seed=0,1", f"run.net.key={CLI_KEY}",
-                     f"hydra.sweep.dir={tmp_path / 'sweep'}", "~hydra.callbacks.analyze")
-    assert sweep.returncode == 0, sweep.stdout + sweep.stderr
+    # one job flies, one is refused (its overrides reach sweep.json)
+    sweep = swarmbox("-m", "algo=hover", "mission=hover", "network.loss_prob=0.0,1.5",
+                     f"run.net.key={CLI_KEY}", f"hydra.sweep.dir={tmp_path / 'sweep'}",
+                     "~hydra.callbacks.analyze")
+    assert sweep.returncode == 2, sweep.stdout + sweep.stderr
     assert "run.net.key=***" in sweep.stdout + sweep.stderr   # the console job list, redacted
     assert "run.net.key=***" in (tmp_path / "sweep" / "multirun.yaml").read_text()
+    summary = json.loads((tmp_path / "sweep" / "sweep.json").read_text())
+    assert summary["counts"] == {"ok": 1} and "run.net.key=***" in summary["invalid"][0]["overrides"]
     run = swarmbox("algo=hover", "mission=hover", f"run.net.key={CLI_KEY}", "run.progress=false",
                    f"run.out_dir={tmp_path / 'run'}")
     assert run.returncode == 0, run.stdout + run.stderr

@@ -52,6 +52,22 @@ def test_when_the_leader_aborts_the_mission_goes_on_under_the_ground(run):
         assert list(table(d, f"drone_{follower}", "stages")["name"])[-1] == "TERMINATION"
 
 
+def test_when_the_leader_aborts_and_no_drone_takes_over_the_run_is_aborted(run):
+    """The followers are cut off from the ground (and the leader) just before the leader's failsafe:
+    nobody can carry the mission on. It once landed at once and recorded the run ``ok``."""
+    from tests.conftest import table
+
+    manifest, d = run("algo=hover", "mission=hover", "topology=leader_follower",
+                      "fault=[partition,battery_failsafe]", "fault.partition.targets=[1,2,3]",
+                      "fault.partition.onset_s=4.9", "fault.battery_failsafe.targets=[0]",
+                      "fault.battery_failsafe.onset_s=5", "run.min_alive=0")
+    assert manifest["status"] == "aborted"
+    assert manifest["reason"].startswith("every drone the ground commands aborted (drone 0) and none took "
+                                         "over: the EXECUTION was cut short")
+    ground = list(table(d, "ground", "stages")["name"])
+    assert ground[-1] == "ABORT" and "LANDING" not in ground
+
+
 def test_ctrl_c_ends_a_processes_run_interrupted_as_in_one_process(tmp_path):
     import signal
     import time

@@ -31,7 +31,8 @@ def check_record(run_dir: Path, proc: subprocess.CompletedProcess, cause: str) -
     missing = manifest["tables_not_written"]
     assert manifest["status"] == "failed" and missing
     assert manifest["reason"] == f"could not finish logs: {', '.join(missing)} not written: {cause}"
-    on_disk = sorted(p.relative_to(run_dir / "logs").as_posix() for p in (run_dir / "logs").rglob("*.parquet"))
+    logs = run_dir / "logs"
+    on_disk = sorted(p.relative_to(logs).as_posix() for p in logs.rglob("*.parquet"))
     assert on_disk and not set(missing) & set(on_disk)
     for name in on_disk:
         pq.read_table(run_dir / "logs" / name)   # complete: a cut file would not read

@@ -11,9 +11,12 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-# ~5 s of wall time per run: long enough for a second process to arrive while it flies
-SLOW = ["algo=hover", "mission=hover", "algo.drone._target_=tests.run.algos.SlowDrone",
-        "+algo.params.delay_s=0.002", "algo.params.hover_s=3"]
+
+
+def held(flag: Path) -> list[str]:
+    """A run that stays in flight until ``flag`` exists (whatever the machine's load)."""
+    return ["algo=hover", "mission=hover", "algo.drone._target_=tests.run.algos.WaitingDrone",
+            f"+algo.params.flag={flag}", "algo.params.hover_s=1", "run.hook_timeout_s=null"]
 
 
 def swarmbox(*args: str, wait: bool = True):
@@ -33,12 +36,14 @@ def wait_for(path: Path, proc: subprocess.Popen, timeout_s: float = 120.0) -> No
 
 
 def test_a_second_sweep_into_the_same_directory_is_refused_and_the_first_finishes_intact(tmp_path):
-    sweep = tmp_path / "study"
-    first = swarmbox("-m", *SLOW, "seed=0,1", f"hydra.sweep.dir={sweep}", "~hydra.callbacks.analyze",
+    sweep, flag = tmp_path / "study", tmp_path / "go"
+    first = swarmbox("-m", *held(flag), "seed=0,1", f"hydra.sweep.dir={sweep}", "~hydra.callbacks.analyze",
                      wait=False)
     try:
         wait_for(sweep / "0" / "config.yaml", first)   # the first job flies
-        second = swarmbox("-m", *SLOW, "seed=0,1", f"hydra.sweep.dir={sweep}", "~hydra.callbacks.analyze")
+        second = swarmbox("-m", *held(flag), "seed=0,1", f"hydra.sweep.dir={sweep}",
+                          "~hydra.callbacks.analyze")
+        flag.touch()
         out, err = first.communicate(timeout=300)
     finally:
         first.kill()
@@ -55,11 +60,12 @@ def test_a_second_sweep_into_the_same_directory_is_refused_and_the_first_finishe
 
 
 def test_a_second_run_into_a_run_directory_being_written_is_refused(tmp_path):
-    run_dir = tmp_path / "run"
-    first = swarmbox(*SLOW, f"run.out_dir={run_dir}", "run.progress=false", wait=False)
+    run_dir, flag = tmp_path / "run", tmp_path / "go"
+    first = swarmbox(*held(flag), f"run.out_dir={run_dir}", "run.progress=false", wait=False)
     try:
         wait_for(run_dir / "config.yaml", first)
-        second = swarmbox(*SLOW, f"run.out_dir={run_dir}", "run.progress=false")
+        second = swarmbox(*held(flag), f"run.out_dir={run_dir}", "run.progress=false")
+        flag.touch()
         first.communicate(timeout=300)
     finally:
         first.kill()

@@ -5,8 +5,10 @@ written — or, if only the build can detect it, after removing what the run had
 starts, whatever happens — success, abort, a crashing or hung user hook, a signal — the run
 directory ends up with ``run.json`` (status ``ok`` / ``aborted`` / ``failed`` / ``interrupted``,
 reason, traceback, simulated time and ticks reached), the resolved ``config.yaml`` and every log row
-written so far. Files are written atomically, and a directory that already holds a finished run is
-never written into.
+written so far. Files are written atomically; a directory that already holds a finished run, or that
+another process is writing into (:mod:`swarmbox.run.claims`), is never written into. The record's
+fields, status rules and redaction are :mod:`swarmbox.run.record`'s, shared with the processes
+runtime.
 """
 
 from __future__ import annotations

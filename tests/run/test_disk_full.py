@@ -68,3 +68,25 @@ def test_a_full_disk_still_gets_run_json_naming_each_table(small_disk):
     proc = swarmbox(run_dir)
     check_record(run_dir, proc, "No space left on device")
     assert proc.stderr.count("\n") <= 2   # the summary line and where the traceback is, no wall
+
+
+def test_a_record_bigger_than_its_reservation_on_a_full_disk_is_written_without_its_bulk(small_disk,
+                                                                                         monkeypatch):
+    from swarmbox.run.record import RunJson
+
+    monkeypatch.setattr(RunJson, "RESERVE", 4096)
+    run_json = RunJson(small_disk, secrets={"s3cr3t-value"})
+    run_json.reserve()
+    filler = small_disk / "filler"
+    with open(filler, "wb") as f, pytest.raises(OSError):   # the run's tables take the rest
+        while True:
+            f.write(b"\0" * 65536)
+            f.flush()
+    manifest = {"status": "failed", "reason": "key s3cr3t-value leaked?", "problems": [],
+                "node_results": {f"drone_{i}": {"reason": "x" * 200} for i in range(100)}}
+    run_json.write(manifest)
+    written = json.loads((small_disk / "run.json").read_text())
+    assert written["status"] == "failed" and written["reason"] == "key *** leaked?"
+    assert "node_results" not in written
+    assert written["problems"] == ["run.json shortened: No space left on device"]
+    assert not (small_disk / ".run.json.tmp").exists()

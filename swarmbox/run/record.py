@@ -25,6 +25,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from swarmbox import __version__
 from swarmbox.core.messages import GROUND_ID
+from swarmbox.hal.launch import KEY_VARS
 from swarmbox.record.schema import SCHEMA_VERSION, node_name
 
 _PROJECT_ROOT = Path(__file__).resolve().parents[2]
@@ -204,6 +205,8 @@ def child_env(keep: Mapping[str, str] | None = None, key_env: str | None = None)
     env = {k: v for k, v in os.environ.items() if k not in KEY_ENVS and k != key_env}
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(_PROJECT_ROOT), env.get("PYTHONPATH")]))
     env.update(keep or {})
+    if key_env and key_env not in KEY_ENVS:   # so that the child hands it on to no process it starts
+        env[KEY_VARS] = key_env
     return env
 
 

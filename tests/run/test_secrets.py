@@ -83,8 +83,10 @@ def _vehicle_pids(parents: list[int]) -> list[int]:
 
 def test_each_process_of_a_processes_run_gets_only_the_keys_it_needs(tmp_path):
     run_dir = tmp_path / "run"
+    # a swarm key variable of the user's naming: it is still kept from the vehicles
     proc = swarmbox("run.runtime=processes", "backend=mavsim", f"backend.signing_key={SIGN_KEY}",
-                    f"run.net.key={CLI_KEY}", "algo=hover", "mission=hover", "algo.params.hover_s=1",
+                    f"run.net.key={CLI_KEY}", "run.net.key_env=MY_SWARM_SECRET", "algo=hover",
+                    "mission=hover", "algo.params.hover_s=1",
                     "run.progress=false", f"run.out_dir={run_dir}", wait=False)
     try:
         deadline = time.monotonic() + 300
@@ -99,7 +101,7 @@ def test_each_process_of_a_processes_run_gets_only_the_keys_it_needs(tmp_path):
     finally:
         proc.kill()
     assert proc.returncode == 0, out
-    swarm, mavlink = "SWARMBOX_NET_KEY", "SWARMBOX_MAVLINK_KEY"
+    swarm, mavlink = "MY_SWARM_SECRET", "SWARMBOX_MAVLINK_KEY"
     assert envs["ground"].get(swarm) == CLI_KEY and mavlink not in envs["ground"]
     for i in range(4):
         assert envs[f"drone_{i}"].get(swarm) == CLI_KEY and envs[f"drone_{i}"].get(mavlink) == SIGN_KEY

@@ -87,11 +87,17 @@ def test_a_writer_process_that_cannot_start_leaves_every_hand_over_to_the_thread
     monkeypatch.setattr(SpillFile, "HOLD_BYTES", 0)   # every hand-over goes to the spill file
     rec = Recorder(tmp_path, flush_rows=5, writer="process")
     append = rec.node(0).appender("stages")
-    for tick in range(40):
+    for tick in range(5):
+        append((tick * 0.025, tick, 1, "ICEBREAK", ""))
+    rec.flush()
+    deadline = time.monotonic() + 30
+    while not rec.writer.startswith("thread (writer process unavailable"):   # it failed to start
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    for tick in range(5, 40):   # hand-overs encoded on this thread from now on
         append((tick * 0.025, tick, 1, "ICEBREAK", ""))
         rec.maybe_flush()
     rec.close()
-    assert rec.writer.startswith("thread (writer process unavailable")
     assert _stages(tmp_path) == list(range(40))
 
 

@@ -105,7 +105,9 @@ def write(sweep_tables: Path, results: Path = RESULTS) -> list[Path]:
     results.mkdir(parents=True, exist_ok=True)
     summary = pd.read_csv(sweep_tables / "summary.csv")
     summary[summary["algo"].str.startswith("delivery_")].to_csv(results / "summary.csv", index=False)
-    shutil.copyfile(sweep_tables / "paired.csv", results / "paired.csv")
+    paired = pd.read_csv(sweep_tables / "paired.csv")
+    cited = {metric for _, _, metric in FINDINGS.values()}
+    paired[paired["metric"].isin(cited)].to_csv(results / "paired.csv", index=False)   # the cited metrics
     shutil.copyfile(sweep_tables / "rq4_package_waits.md", results / "rq4_package_waits.md")
     written = [results / n for n in ("summary.csv", "paired.csv", "rq4_package_waits.md")]
     for name, text in tables_from(results).items():

@@ -18,8 +18,10 @@ Across drones: mean and population standard deviation (ddof 0) of the per-drone 
 Safety and swarm metrics align drones on the run's global ``tick``:
 - separation at a tick = smallest 3-D distance over drone pairs (truth if every drone has it, else the
   estimate; nearest neighbours from a k-d tree, never an N x N matrix); ``min_separation_m`` its
-  minimum over the window; ``time_below_separation_s`` = ticks with separation < threshold x tick
-  length;
+  minimum over the window; ``time_below_separation_s`` = the time of the logged ticks with separation
+  < threshold, each standing for the ticks up to the next logged one (at most the state log's period,
+  ``run.state_every_ticks`` x tick length: a gap in the log is not time below), so logging every
+  n-th tick does not change it by more than one state period per crossing of the threshold;
 - order at a tick = |sum_i v_i| / sum_i |v_i| over the drones' estimated 3-D velocities (NaN when
   the swarm is at rest); ``order_mean`` its mean over the window;
 - collision and safety events are counted over the whole run: a collision matters whenever it happens.
@@ -328,13 +330,26 @@ def swarm_timeline(state: pd.DataFrame, drones: list[int]) -> pd.DataFrame:
                          "order": order.reindex(times.index).to_numpy()})
 
 
+def row_durations(ticks: np.ndarray, tick_s: float, every_ticks: int = 1) -> np.ndarray:
+    """Time each row of a per-tick timeline stands for: the ticks up to the next row, at most
+    ``every_ticks`` (the log's period; also the last row's), times ``tick_s``."""
+    ticks = np.asarray(ticks, dtype="float64")
+    if not len(ticks):
+        return np.zeros(0)
+    steps = np.diff(ticks, append=ticks[-1] + every_ticks)
+    return np.clip(steps, 0, every_ticks) * tick_s
+
+
 def swarm_summary(swarm: pd.DataFrame, events: pd.DataFrame, tick_s: float,
-                  threshold_m: float) -> dict[str, float]:
-    """Safety and order scalars over the ticks of ``swarm``; event counts over all of ``events``."""
+                  threshold_m: float, every_ticks: int = 1) -> dict[str, float]:
+    """Safety and order scalars over the ticks of ``swarm`` (state logged every ``every_ticks``
+    ticks of ``tick_s``); event counts over all of ``events``."""
     sep, order = swarm["separation_m"], swarm["order"]
+    below = (sep < threshold_m).to_numpy(dtype=bool)
     return {
         "min_separation_m": float(sep.min()) if sep.notna().any() else np.nan,
-        "time_below_separation_s": float((sep < threshold_m).sum() * tick_s),
+        "time_below_separation_s": float(row_durations(swarm["tick"].to_numpy(), tick_s,
+                                                       every_ticks)[below].sum()),
         "collision_events": float((events["kind"] == "collision").sum()),
         "safety_events": float((events["kind"] == "safety").sum()),
         "order_mean": float(order.mean()) if order.notna().any() else np.nan,

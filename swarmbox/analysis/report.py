@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from swarmbox.analysis import anomaly, metrics, mission, network
+from swarmbox.analysis import anomaly, metrics, mission, network, sampling
 from swarmbox.analysis.catalog import Direction
 from swarmbox.analysis.load import RunData, load_run
 from swarmbox.analysis.timeline import drone_timeline
@@ -96,14 +96,6 @@ def _first_time(run: RunData) -> float:
     return min(starts) if starts else np.nan
 
 
-def _tick_s(run: RunData) -> float:
-    if run.manifest.get("tick_s"):
-        return float(run.manifest["tick_s"])
-    ticks = run.tables["state"].drop_duplicates("tick").sort_values("tick")
-    steps = np.diff(ticks[T]) / np.maximum(np.diff(ticks["tick"]), 1)
-    return float(np.median(steps)) if len(steps) else np.nan
-
-
 def _manifest_scalars(manifest: dict) -> dict[str, float]:
     out = {}
     for key in ("sim_time_s", "wall_time_s", "real_time_factor", "n_drones"):
@@ -136,8 +128,8 @@ def _scalars(run: RunData, window: metrics.ExecWindow | None, span: metrics.Exec
     out["tx_bytes_per_s_mean"] = float(tx.mean()) if len(tx) else np.nan
     out["discrepancy_h_m_mean"] = float(per_drone["disc_h_m_mean"].mean())
     out["discrepancy_h_m_max"] = float(per_drone["disc_h_m_max"].max())
-    out |= metrics.swarm_summary(metrics.within(swarm, span), run.tables["events"], _tick_s(run),
-                                 opts.separation_m)
+    out |= metrics.swarm_summary(metrics.within(swarm, span), run.tables["events"], sampling.tick_s(run),
+                                 opts.separation_m, sampling.state_every_ticks(run))
     conn = metrics.within(connectivity, span)["connectivity"]
     out["connectivity_mean"] = float(conn.mean()) if len(conn) else np.nan
     out["connectivity_min"] = float(conn.min()) if len(conn) else np.nan
@@ -153,7 +145,7 @@ def analyze_run(source: str | Path | RunData, opts: AnalysisOptions | None = Non
     if window is None:
         run.problems.append("the ground never entered EXECUTION: workload metrics are NaN")
     span = window or metrics.ExecWindow(_first_time(run), _last_time(run), False)
-    flow = network.message_flow(run.tables["messages"], _tick_s(run))
+    flow = network.message_flow(run.tables["messages"], sampling.tick_s(run))
     exec_flow = network.between(flow, span.start, span.end)
     full = not opts.scalars_only
     links = network.link_stats(exec_flow, span.duration) if full else pd.DataFrame()
@@ -162,7 +154,8 @@ def analyze_run(source: str | Path | RunData, opts: AnalysisOptions | None = Non
     per_drone = _drone_table(run, window, span, agents, disc)
     onset = _onset(run, opts)
     flagged = full or onset is not None   # the flags feed the scalars through the diagnosis only
-    timeline = drone_timeline(flow, disc, run.drones, opts.window_s) if flagged else pd.DataFrame()
+    timeline = (drone_timeline(flow, disc, run.drones, opts.window_s, sampling.tick_s(run)) if flagged
+                else pd.DataFrame())
     swarm = metrics.swarm_timeline(run.tables["state"], run.drones)
     connectivity = network.connectivity_timeline(flow, run.nodes, opts.graph_window_s)
     flags = anomaly.detect(timeline, opts.tests()) if flagged else pd.DataFrame()

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from swarmbox.analysis import diagnosis as dg
-from swarmbox.analysis import network, scoring
+from swarmbox.analysis import network, sampling, scoring
 from swarmbox.analysis.load import load_run
 from swarmbox.analysis.unify import T, unify
 
@@ -76,7 +76,7 @@ def evaluate_run(run_dir: str | Path, settings: Sequence[dg.DiagnosisOptions],
             "target": truth.target if truth else None, "onset_u": truth.onset_u if truth else np.nan,
             "scan_s": span[1] - span[0]}
     if truth is not None and truth.name in ("latency", "packet_loss", "burst_loss"):
-        flow = network.message_flow(run.tables["messages"])
+        flow = network.message_flow(run.tables["messages"], max_latency_s=sampling.max_latency_s(run))
         base["measured"] = scoring.measured_excess(flow, run.drones, truth)
     rows = []
     for opts in settings:

@@ -165,7 +165,8 @@ def drone_series(run: RunData, opts: DiagnosisOptions | None = None,
     disc = disc[disc["node"].isin(drones)].assign(tick=nearest_tick(disc[T], step)).rename(
         columns={"node": "drone"})
     values = {m: _matrix(disc, m, ticks, drones) for m in DISC}
-    flow = network.touching(network.message_flow(run.tables["messages"], sampling.tick_s(run)),
+    flow = network.touching(network.message_flow(run.tables["messages"], sampling.tick_s(run),
+                                                 sampling.max_latency_s(run)),
                             ["t_send", "t_recv", "latency_ms", "delivered", "counted", "lost"])
     flow = flow[flow["agent"].isin(drones)].rename(columns={"agent": "drone"})
     got = flow[flow["delivered"]]

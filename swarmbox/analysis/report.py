@@ -145,7 +145,7 @@ def analyze_run(source: str | Path | RunData, opts: AnalysisOptions | None = Non
     if window is None:
         run.problems.append("the ground never entered EXECUTION: workload metrics are NaN")
     span = window or metrics.ExecWindow(_first_time(run), _last_time(run), False)
-    flow = network.message_flow(run.tables["messages"], sampling.tick_s(run))
+    flow = network.message_flow(run.tables["messages"], sampling.tick_s(run), sampling.max_latency_s(run))
     exec_flow = network.between(flow, span.start, span.end)
     full = not opts.scalars_only
     links = network.link_stats(exec_flow, span.duration) if full else pd.DataFrame()

@@ -14,6 +14,9 @@ import numpy as np
 
 from swarmbox.analysis.load import RunData
 
+#: The distributed runtime refuses frames older than ``run.net.max_age_s`` (2 s by default).
+MAX_AGE_S = 2.0
+
 
 def tick_s(run: RunData) -> float:
     """Length of one tick in s: run.json's ``tick_s``, else ``1 / run.tick_hz`` of the config, else the
@@ -51,3 +54,24 @@ def state_every_ticks(run: RunData) -> int:
 def state_period_s(run: RunData) -> float:
     """Time one state row of a drone stands for, in s (tick length x ticks between rows)."""
     return tick_s(run) * state_every_ticks(run)
+
+
+def _delays_s(node: object) -> list[float]:
+    """Every configured one-way delay bound (latency + jitter, in s) in a config subtree."""
+    if isinstance(node, dict):
+        own = [(float(node.get("latency_ms") or 0) + float(node.get("jitter_ms") or 0)) / 1e3]
+        return own + [d for v in node.values() for d in _delays_s(v)]
+    if isinstance(node, list):
+        return [d for v in node for d in _delays_s(v)]
+    return []
+
+
+def max_latency_s(run: RunData) -> float:
+    """The longest plausible latency of a message in this run: the age at which the distributed
+    runtime refuses a frame (``run.net.max_age_s``), or twice the worst one-way delay the network and
+    fault configs allow, whichever is longer. A receive later than that after a send is not its receive."""
+    cfg = run.config if isinstance(run.config, dict) else {}
+    age = ((cfg.get("run") or {}).get("net") or {}).get("max_age_s", MAX_AGE_S)
+    delays = _delays_s(cfg.get("network")) + _delays_s(cfg.get("fault"))
+    age = float(age) if isinstance(age, int | float) and age > 0 else MAX_AGE_S
+    return max(age, 2 * max(delays, default=0.0))

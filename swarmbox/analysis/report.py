@@ -1,4 +1,11 @@
-"""One run, end to end: load -> unify -> metrics -> timeline -> anomalies -> diagnosis."""
+"""One run, end to end: load -> unify -> metrics -> timeline -> anomalies -> diagnosis.
+
+Two diagnoses, kept apart: the *finding* (:mod:`.diagnosis`: the first alarm of the onset-agnostic
+scan, drone, metric and time, with every alarm episode) is made for every run from its logs alone,
+fault events or not; the onset-based table (:func:`.anomaly.diagnose`: t_f, tau_d, Sigma_a against a
+fault onset) exists only when a truth does (a fault event, or an onset given), and is written as
+*scoring*: it grades against that truth, it does not find anything by itself.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +16,7 @@ import numpy as np
 import pandas as pd
 
 from swarmbox.analysis import anomaly, metrics, mission, network, sampling
+from swarmbox.analysis import diagnosis as dg
 from swarmbox.analysis.catalog import Direction
 from swarmbox.analysis.load import RunData, load_run
 from swarmbox.analysis.timeline import drone_timeline
@@ -69,11 +77,14 @@ class RunAnalysis:
     swarm: pd.DataFrame
     connectivity: pd.DataFrame
     flags: pd.DataFrame
-    diagnosis: pd.DataFrame
+    diagnosis: pd.DataFrame   # onset-based scoring (empty without a fault onset)
     markers: pd.DataFrame
     onset: anomaly.FaultOnset | None
     scalars: dict[str, float]
     directions: dict[str, Direction]
+    #: the onset-agnostic finding: one row (detected, drone, metric, t_u, value, score, alarms)
+    finding: pd.DataFrame = field(default_factory=pd.DataFrame)
+    alarms: pd.DataFrame = field(default_factory=pd.DataFrame)   # every alarm episode of the scan
 
     @property
     def problems(self) -> list[str]:
@@ -166,8 +177,24 @@ def analyze_run(source: str | Path | RunData, opts: AnalysisOptions | None = Non
     mission_values, directions = mission.mission_metrics(run.tables["events"], specs, span.start)
     scalars |= mission_values
     markers = mission.marker_table(run.tables["events"], specs, span.start) if full else pd.DataFrame()
+    finding, alarms = _finding(run, window, opts) if full else (pd.DataFrame(), pd.DataFrame())
     return RunAnalysis(run, clocks, window, flow, links, agents, per_drone, timeline, swarm, connectivity,
-                       flags, diagnosis, markers, onset, scalars, directions)
+                       flags, diagnosis, markers, onset, scalars, directions, finding, alarms)
+
+
+def _finding(run: RunData, window: metrics.ExecWindow | None,
+             opts: AnalysisOptions) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The onset-agnostic diagnosis over the EXECUTION stage: its first alarm and every alarm episode,
+    with the run analysis' minimum deviations. No fault event is read."""
+    if window is None:
+        return pd.DataFrame([{"detected": False, "alarms": 0}]), pd.DataFrame(columns=dg.ALARM_COLUMNS)
+    scan = dg.DiagnosisOptions(min_deviation={k: v for k, v in opts.min_deviation.items() if k in dg.METRICS})
+    series = dg.drone_series(run, scan, (window.start, window.end))
+    run.problems.extend(series.problems)
+    alarms = dg.scan(series, scan)
+    first = {"detected": False, "drone": None, "metric": None, T: np.nan, "value": np.nan, "score": np.nan}
+    first |= dg.finding(alarms)
+    return pd.DataFrame([first | {"alarms": len(alarms), "grid_s": series.step_s}]), alarms
 
 
 def _onset(run: RunData, opts: AnalysisOptions) -> anomaly.FaultOnset | None:

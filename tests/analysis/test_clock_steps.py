@@ -68,7 +68,7 @@ def test_without_step_detection_the_jump_is_fitted_as_one_line(tmp_path):
     clocks = unify(run, ClockOptions(step_min_s=0))
     assert (clocks["node"] == 2).sum() == 1 and abs(clocks.set_index("node").loc[2, "drift_ppm"]) > 1e4
     lat = network.message_flow(run.tables["messages"])
-    assert (lat["latency_ms"] < -100).any()
+    assert (lat["latency_ms"].abs() > 100).any()   # skewed by seconds
 
 
 def test_a_linear_drift_is_still_one_line(tmp_path):

@@ -158,3 +158,36 @@ def test_a_grid_finer_than_the_log_is_reported(flights):
     series = dg.drone_series(run, dg.DiagnosisOptions(step_s=0.025))
     assert len(series.problems) == 1 and "grid" in series.problems[0]
     assert not dg.drone_series(run).problems
+
+
+#: A moving flight: 5 drones delivering 6 packages in a 60 m square (GNSS at 10 Hz: a 4-tick sawtooth
+#: of the GNSS - estimate gap, which a 20 Hz state log sees only just after each fix).
+MOVING = ("mission=delivery", "algo=delivery_distance_rr", "mission.generator.count=6",
+          "mission.generator.half_size_m=30")
+
+
+@pytest.fixture(scope="module")
+def moving(tmp_path_factory) -> dict[int, RunAnalysis]:
+    root = tmp_path_factory.mktemp("moving")
+    out = {}
+    for every in (1, 2, 4):
+        manifest = run_config(root / str(every), (*MOVING, f"run.state_every_ticks={every}"))
+        assert manifest["status"] == "ok", manifest["reason"]
+        out[every] = analyze_run(root / str(every))
+    return out
+
+
+@pytest.mark.parametrize("every", [2, 4])
+def test_a_moving_flight_s_discrepancy_is_not_aliased(moving, every):
+    """Between two logged rows the estimate moves with its velocity; it departs from that by at most
+    a T^2 / 2 (a: the configured acceleration limit), so that bounds the discrepancy's change."""
+    ref, got = moving[1], moving[every]
+    period = sampling.state_period_s(got.run)
+    tol = float(got.run.config["run"]["safety"]["max_accel_m_s2"]) * period**2 / 2
+    for metric in ("discrepancy_h_m_mean", "discrepancy_h_m_max"):
+        assert got.scalars[metric] == pytest.approx(ref.scalars[metric], abs=tol), metric
+    # the logged rows alone (what the mean was before) are off by far more: the test has teeth
+    rows = metrics.within(metrics.discrepancy(got.run.tables["state"]), got.window)
+    assert rows.groupby("node")["disc_h_m"].mean().mean() < ref.scalars["discrepancy_h_m_mean"] - 2 * tol
+    assert got.scalars["distance_h_m_mean"] == pytest.approx(ref.scalars["distance_h_m_mean"],
+                                                             abs=2 * period * 12.0)   # 12 m/s: speed limit

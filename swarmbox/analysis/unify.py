@@ -290,6 +290,11 @@ def unify(run: RunData, opts: ClockOptions | None = None, sent_times: bool = Tru
              if opts.step_min_s > 0 else [])
     if steps:
         return _unify_lives(run, opts, steps, tick_s, sent_times)
+    return _unify_plain(run, opts, sent_times)
+
+
+def _unify_plain(run: RunData, opts: ClockOptions, sent_times: bool) -> pd.DataFrame:
+    """:func:`unify` with one clock per node."""
     clocks = estimate_clocks(run.tables["messages"], run.nodes, opts)
     for frame in run.tables.values():
         frame[T] = to_unified(frame["t_s"], frame["node"], clocks)
@@ -302,13 +307,22 @@ def unify(run: RunData, opts: ClockOptions | None = None, sent_times: bool = Tru
 
 def _unify_lives(run: RunData, opts: ClockOptions, steps: list[clock_steps.Step], tick_s: float,
                  sent_times: bool) -> pd.DataFrame:
-    """:func:`unify` of a run where some clocks step: every life of a node is a clock of its own."""
+    """:func:`unify` of a run where some clocks step: every life of a node is a clock of its own.
+
+    A step is kept only when the messages confirm it (the lives' estimated clocks differ by at least
+    half of ``step_min_s`` there): a real-time node that stalls and catches up also moves its local
+    time against its ticks, but not its clock against the others'."""
     ids = clock_steps.clock_ids(run.tables, steps, tick_s)
     msgs = run.tables["messages"]
     remapped = pd.DataFrame({"node": ids["messages"], "src": ids["messages_src"], "kind": msgs["kind"],
                              "t_s": msgs["t_s"], "t_sent_s": msgs["t_sent_s"]})
     lives = sorted({int(i) for i in np.concatenate(list(ids.values())) if i >= clock_steps.LIFE_STRIDE})
     clocks = estimate_clocks(remapped, [*run.nodes, *lives], opts)
+    confirmed = _confirmed(steps, clocks, opts.step_min_s / 2)
+    if len(confirmed) < len(steps):
+        if not confirmed:
+            return _unify_plain(run, opts, sent_times)
+        return _unify_lives(run, opts, confirmed, tick_s, sent_times)
     for name, frame in run.tables.items():
         frame[T] = to_unified(frame["t_s"], pd.Series(ids[name], index=frame.index), clocks)
     if sent_times:
@@ -322,6 +336,22 @@ def _unify_lives(run: RunData, opts: ClockOptions, steps: list[clock_steps.Step]
     clocks = _with_truth(clocks, run.manifest.get("clocks") or {})
     run.problems.extend(clock_steps.describe(steps, clocks))
     return clocks
+
+
+def _confirmed(steps: list[clock_steps.Step], clocks: pd.DataFrame, least_s: float) -> list[clock_steps.Step]:
+    """The steps whose two lives' estimated clocks differ by at least ``least_s`` at the step."""
+    est = clocks.set_index("node")
+    kept = []
+    for s in steps:
+        life = sum(o.node == s.node and o.tick <= s.tick for o in steps)
+        after, before = s.node + life * clock_steps.LIFE_STRIDE, s.node + (life - 1) * clock_steps.LIFE_STRIDE
+        if after not in est.index or before not in est.index:
+            continue
+        reading = [float(est.loc[n, "offset_s"]) + (1 + float(est.loc[n, "drift_ppm"]) * 1e-6) * s.t_s
+                   for n in (after, before)]
+        if abs(reading[0] - reading[1]) >= least_s:
+            kept.append(s)
+    return kept
 
 
 def _life_starts(clocks: pd.DataFrame, state: pd.DataFrame, state_ids: np.ndarray) -> pd.DataFrame:

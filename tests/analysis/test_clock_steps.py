@@ -77,3 +77,15 @@ def test_a_linear_drift_is_still_one_line(tmp_path):
     assert (clocks["life"] == 0).all() and not any("clock step" in p for p in run.problems)
     assert clocks.loc[2, "offset_s"] == pytest.approx(0.5, abs=1e-3)
     assert clocks.loc[2, "drift_ppm"] == pytest.approx(1000, rel=0.01)
+
+
+def test_a_stall_against_the_ticks_alone_is_not_a_step(tmp_path):
+    """A real-time node that falls 0.2 s behind its ticks moves its local time against its tick count,
+    not its clock against the others': the messages do not confirm a step, and none is reported."""
+    run = _flown(tmp_path)
+    state = run.tables["state"]
+    late = (state["node"] == 2) & (state["tick"] >= 400)
+    state.loc[late, "tick"] -= 8   # 8 ticks of 25 ms: the residual local - tick time jumps by 0.2 s
+    clocks = unify(run)
+    assert (clocks["life"] == 0).all() and not any("clock step" in p for p in run.problems)
+    assert abs(clocks.set_index("node").loc[2, "offset_s"]) < 1e-3

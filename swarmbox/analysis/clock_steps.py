@@ -124,11 +124,9 @@ def clock_ids(tables: dict[str, pd.DataFrame], steps: list[Step], tick_s: float)
                                              n, tick_s)
         out[name] = node + life * LIFE_STRIDE
     msgs = tables["messages"]
-    node = msgs["node"].to_numpy().astype(np.int64)
-    life_row = out["messages"] // LIFE_STRIDE
-    approx_u = msgs["t_s"].to_numpy(dtype="float64") - np.array(
-        [offsets.get((int(n), int(k)), 0.0) for n, k in zip(node, life_row, strict=True)]) \
-        if len(msgs) else np.zeros(0)
+    by_id = {n + k * LIFE_STRIDE: o for (n, k), o in offsets.items()}
+    offset = pd.Series(out["messages"]).map(by_id).fillna(0.0).to_numpy(dtype="float64")
+    approx_u = msgs["t_s"].to_numpy(dtype="float64") - offset   # a receiver's row on the tick clock
     src = msgs["src"].fillna(-1).to_numpy().astype(np.int64)
     life = _sender_lives(msgs["t_sent_s"].to_numpy(dtype="float64"), approx_u, src, steps, offsets, tick_s)
     out["messages_src"] = src + life * LIFE_STRIDE

@@ -213,7 +213,7 @@ def acceptance_table(smallest: pd.DataFrame) -> pd.DataFrame:
 
 def held_out_table(rows: pd.DataFrame) -> pd.DataFrame:
     """The detector setting chosen per cell on :data:`CALIBRATION_SEEDS`, reported on the others."""
-    out = benchstats.held_out_smallest(rows, CALIBRATION_SEEDS)
+    out = detection.held_out_smallest(rows, CALIBRATION_SEEDS)
     out = out[out["detector"] == "swarmbox"].copy()
     for col in ("calibration_magnitude", "smallest_magnitude"):
         out[col] = [f"{m:g} {UNITS.get(f, '')}" if np.isfinite(m) else "none of the swept"

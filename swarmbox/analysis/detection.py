@@ -9,14 +9,14 @@ tables.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from swarmbox.analysis import benchstats, network, sampling, scoring
 from swarmbox.analysis import diagnosis as dg
-from swarmbox.analysis import network, sampling, scoring
 from swarmbox.analysis.load import load_run
 from swarmbox.analysis.unify import T, unify
 
@@ -166,6 +166,68 @@ def smallest_detected(det: pd.DataFrame, fa: pd.DataFrame, min_rate: float = 0.9
     return pd.DataFrame(out)
 
 
+def split_by_seed(rows: pd.DataFrame, calibration_seeds: Iterable[int]) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(calibration rows, held-out rows): a run belongs to one side by its seed."""
+    calib = rows["seed"].isin(set(calibration_seeds))
+    return rows[calib], rows[~calib]
+
+
+def held_out_smallest(rows: pd.DataFrame, calibration_seeds: Iterable[int], min_rate: float = 0.9,
+                      max_fa: float = 1.0, by: Sequence[str] = ("n_drones", "network"),
+                      level: float = benchstats.LEVEL) -> pd.DataFrame:
+    """Per detector, group and fault: the setting chosen on the calibration seeds (most sensitive with
+    <= ``max_fa`` false alarms per drone-hour there, as :func:`.smallest_detected`), and
+    on the held-out seeds, with that setting: the smallest magnitude detected in >= ``min_rate`` of
+    the runs, its detected/runs with the exact interval, and the false-alarm count, drone-hours and
+    exact rate interval."""
+    calib, test = split_by_seed(rows, calibration_seeds)
+    if calib.empty or test.empty:
+        raise ValueError("both the calibration and the held-out seeds need runs")
+    chosen = smallest_detected(detection_rates(calib, by),
+                                         false_alarm_rates(calib, by), min_rate, max_fa, by)
+    det = benchstats.with_detection_ci(detection_rates(test, by), level)
+    fa = benchstats.with_false_alarm_ci(false_alarm_rates(test, by), level)
+    setting = [c for c in SETTING if c != "detector"]
+    out = []
+    for _, c in chosen.iterrows():
+        key = {k: c[k] for k in ("detector", *by)}
+        match = {**key, **{k: _setting_of(calib, c, k) for k in setting}}
+        d = det[_rows_matching(det, {**match, "fault": c["fault"]})].sort_values("magnitude")
+        f = fa[_rows_matching(fa, match)]
+        good = d[d["detection_rate"] >= min_rate]
+        hit = good.iloc[0] if len(good) else None
+        out.append({**key, "fault": c["fault"], **{k: match[k] for k in setting},
+                    "calibration_magnitude": c["smallest_magnitude"],
+                    "smallest_magnitude": hit["magnitude"] if hit is not None else np.nan,
+                    "detected": f"{int(hit['detected'])}/{int(hit['runs'])}" if hit is not None else "",
+                    "detection_ci_low": hit["detection_ci_low"] if hit is not None else np.nan,
+                    "detection_ci_high": hit["detection_ci_high"] if hit is not None else np.nan,
+                    "false_alarms": int(f["false_alarms"].sum()),
+                    "healthy_drone_h": float(f["healthy_drone_h"].sum()),
+                    "fa_ci_high": float(f["fa_ci_high"].iloc[0]) if len(f) == 1 else np.nan})
+    return pd.DataFrame(out)
+
+
+def _setting_of(calib: pd.DataFrame, chosen: pd.Series, column: str):
+    """The chosen setting's value of ``column`` (``smallest_detected`` keeps rule and scale only)."""
+    if column in chosen.index:
+        return chosen[column]
+    same = calib[(calib["detector"] == chosen["detector"]) & (calib["rule"] == chosen["rule"])
+                 & (calib["threshold_scale"] == chosen["threshold_scale"])]
+    values = same[column].unique()
+    if len(values) != 1:
+        raise ValueError(f"setting column {column} is ambiguous for {chosen['rule']} "
+                         f"x{chosen['threshold_scale']}")
+    return values[0]
+
+
+def _rows_matching(frame: pd.DataFrame, values: dict) -> pd.Series:
+    mask = pd.Series(True, index=frame.index)
+    for k, v in values.items():
+        mask &= frame[k] == v
+    return mask
+
+
 def roc(rows: pd.DataFrame, by: Sequence[str] = ("fault", "magnitude")) -> pd.DataFrame:
     """Detection rate against false alarms per drone-hour over the threshold settings, per ``by``."""
     fa = false_alarm_rates(rows, by=())
@@ -209,8 +271,7 @@ def _evaluate_or_skip(run_dir: Path, settings: list[dg.DiagnosisOptions]) -> pd.
 def write_report(rows: pd.DataFrame, out: Path) -> list[Path]:
     """Rows, detection rates, false-alarm rates and the smallest detected magnitudes (CSV + Markdown),
     and the detection-rate and ROC figures."""
-    # benchstats imports this module: imported here, not at the top
-    from swarmbox.analysis import benchstats, diagnosis_plots, figures
+    from swarmbox.analysis import diagnosis_plots, figures
     from swarmbox.analysis.tables import write_table
 
     fa = false_alarm_rates(rows)
@@ -219,8 +280,8 @@ def write_report(rows: pd.DataFrame, out: Path) -> list[Path]:
     if (rows["fault"] != "none").any():
         det = detection_rates(rows)
         written += write_table(benchstats.with_detection_ci(det), out, "detection_rates")
-        # in-sample: the setting is chosen on the runs it is reported on (benchstats.held_out_smallest
-        # splits by seed when there are seeds to spare)
+        # in-sample: the setting is chosen on the runs it is reported on (held_out_smallest splits by
+        # seed when there are seeds to spare)
         written += write_table(smallest_detected(det, fa), out, "smallest_detected")
         chosen = (det["threshold_scale"] == 1.0) | (det["detector"] == "baseline")
         default = det[(det["rule"] != "paper") & chosen]

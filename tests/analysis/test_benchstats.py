@@ -49,7 +49,7 @@ def test_the_setting_is_chosen_on_calibration_seeds_and_reported_on_the_others()
                              detected=mag == 2.0 or not held_out, false_alarms=3 if held_out else 0))
             data.append(rows(seed, 1.0, fault="gps_drift", magnitude=mag, detected=mag == 2.0,
                              false_alarms=0))
-    [row] = benchstats.held_out_smallest(pd.DataFrame(data), calibration_seeds=[0]).to_dict("records")
+    [row] = detection.held_out_smallest(pd.DataFrame(data), calibration_seeds=[0]).to_dict("records")
     assert row["threshold_scale"] == 0.5 and row["calibration_magnitude"] == 1.0
     assert row["smallest_magnitude"] == 2.0 and row["detected"] == "2/2"
     assert row["false_alarms"] == 12 and row["healthy_drone_h"] == pytest.approx(2.0)
@@ -60,4 +60,4 @@ def test_the_setting_is_chosen_on_calibration_seeds_and_reported_on_the_others()
 def test_a_split_with_no_held_out_run_is_refused():
     data = pd.DataFrame([rows(0, 1.0, fault="gps_drift", magnitude=1.0, detected=True, false_alarms=0)])
     with pytest.raises(ValueError, match="held-out"):
-        benchstats.held_out_smallest(data, calibration_seeds=[0])
+        detection.held_out_smallest(data, calibration_seeds=[0])

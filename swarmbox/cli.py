@@ -25,10 +25,7 @@ USAGE = """usage: swarmbox {run,analyze,compare} [ARGS...]
 
 
 def _run(argv: list[str]) -> int:
-    from swarmbox.run import mode
     from swarmbox.run.__main__ import main as run_main
-
-    mode.install()
 
     sys.argv = ["swarmbox run", *argv]   # Hydra reads its arguments from sys.argv
     # As with `python -m`, the current directory is importable: a user project's algorithms

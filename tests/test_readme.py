@@ -16,9 +16,9 @@ import sys
 from pathlib import Path
 
 import pytest
-from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
+from swarmbox.run.sweeper import sweep_jobs
 from tests import realtime
 from tests.conftest import ROOT, compose_config
 
@@ -57,7 +57,7 @@ def jobs(args: list[str]) -> list[list[str]]:
     if "-m" not in args:
         return [overrides]
     parsed = OverridesParser.create().parse_overrides(overrides)
-    return BasicSweeper.split_arguments(parsed, None)[0]
+    return sweep_jobs(parsed, None)[0]
 
 
 @pytest.mark.parametrize("args", RUNS, ids=" ".join)

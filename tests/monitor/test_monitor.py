@@ -42,8 +42,9 @@ def test_monitor_leaves_the_logs_unchanged(run):
         assert a.equals(b), (node, name)
 
 
+@pytest.mark.replay
 def test_live_stream_to_a_rerun_recording(run, tmp_path):
-    import rerun.chunk as rrc
+    rrc = pytest.importorskip("rerun.chunk", reason="needs the replay extra (Rerun)")
 
     target = tmp_path / "live.rrd"
     manifest, _ = run(*CROSSING, "run.monitor=off", f"run.rerun={target}", "run.monitor_hz=40")
@@ -61,6 +62,7 @@ def test_live_stream_to_a_rerun_recording(run, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.replay
 def test_live_stream_to_a_rerun_server_over_grpc(run, tmp_path):
     """The same stream to a real Rerun server on 127.0.0.1, which saves what it receives."""
     import signal
@@ -70,7 +72,7 @@ def test_live_stream_to_a_rerun_server_over_grpc(run, tmp_path):
     import time
     import warnings
 
-    import rerun.chunk as rrc
+    rrc = pytest.importorskip("rerun.chunk", reason="needs the replay extra (Rerun)")
 
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -6,9 +6,12 @@ Submitit runs its local executor, so the remote-launcher code paths run on any m
 
 import json
 import os
+import secrets
 import shutil
 import subprocess
 import sys
+import tempfile
+from pathlib import Path
 
 import pandas as pd
 import pytest
@@ -18,8 +21,8 @@ from tests.conftest import ROOT
 HOVER = ("algo=hover", "algo.params.hover_s=1", "mission.max_sim_time_s=60")
 
 
-def swarmbox_run(*args, cwd=ROOT, timeout=600):
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "RAY_USAGE_STATS_ENABLED": "0"}
+def swarmbox_run(*args, cwd=ROOT, timeout=600, env=None):
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "RAY_USAGE_STATS_ENABLED": "0", **(env or {})}
     return subprocess.run([sys.executable, "-m", "swarmbox.cli", "run", *args], cwd=cwd, capture_output=True,
                           text=True, timeout=timeout, env=env)
 
@@ -52,6 +55,13 @@ def comparable(table: pd.DataFrame) -> pd.DataFrame:
     return table[table["kind"] != "machine"].reset_index(drop=True)
 
 
+def ray_env(temp_root: Path) -> dict[str, str]:
+    """A throwaway local Ray cluster that leaves nothing behind (docs/scale-out.md, Ray): a token of
+    its own in the environment (no ~/.ray/auth_token written, no token warning) and its session
+    directories under ``temp_root`` (short: Ray's socket paths must fit in 107 bytes)."""
+    return {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32), "RAY_TMPDIR": str(temp_root)}
+
+
 @pytest.mark.slow
 def test_ray_launcher_gives_the_same_tables_as_joblib(tmp_path):
     pytest.importorskip("hydra_plugins.hydra_ray_launcher", reason="needs pip install -e '.[ray]'")
@@ -59,11 +69,22 @@ def test_ray_launcher_gives_the_same_tables_as_joblib(tmp_path):
     joblib = swarmbox_run(*common, "hydra/launcher=joblib", "hydra.launcher.n_jobs=2",
                           f"hydra.sweep.dir={tmp_path / 'joblib'}")
     assert joblib.returncode == 0, joblib.stderr[-3000:]
-    ray = swarmbox_run(*common, "hydra/launcher=ray", "+hydra.launcher.ray.init.num_cpus=2",
-                       "+hydra.launcher.ray.init.include_dashboard=false",
-                       f"hydra.sweep.dir={tmp_path / 'ray'}")
-    assert ray.returncode == 0, ray.stderr[-3000:]
-    assert "Ray Launcher is launching 4 jobs" in ray.stderr + ray.stdout
+    token_file = Path.home() / ".ray" / "auth_token"
+    token_before = token_file.stat().st_mtime_ns if token_file.exists() else None
+    temp_root = Path(tempfile.mkdtemp(prefix="sbray-"))
+    try:
+        ray = swarmbox_run(*common, "hydra/launcher=ray", "+hydra.launcher.ray.init.num_cpus=2",
+                           "+hydra.launcher.ray.init.include_dashboard=false",
+                           f"hydra.sweep.dir={tmp_path / 'ray'}", env=ray_env(temp_root))
+        assert ray.returncode == 0, ray.stderr[-3000:]
+        sessions = list(temp_root.glob("ray/session_*"))
+    finally:
+        shutil.rmtree(temp_root, ignore_errors=True)
+    output = ray.stderr + ray.stdout
+    assert "Ray Launcher is launching 4 jobs" in output
+    assert sessions                                          # Ray kept its session files there
+    assert "auth_token" not in output and "Token authentication is" not in output
+    assert (token_file.stat().st_mtime_ns if token_file.exists() else None) == token_before
     a = pd.read_csv(tmp_path / "joblib" / "tables" / "summary.csv")
     b = pd.read_csv(tmp_path / "ray" / "tables" / "summary.csv")
     assert len(comparable(a)) > 10

@@ -67,7 +67,12 @@ class SwarmBoxSweeper(Sweeper):
         return sweep_jobs(parser.parse_overrides([*params, *arguments]), self.max_batch_size)
 
     def sweep(self, arguments: List[str]) -> Any:  # noqa: UP006
+        """Launch the jobs batch by batch, with every secret hidden from ``multirun.yaml`` and the
+        console job list (the jobs compose from ``arguments``, which keep their values)."""
+        from swarmbox.run.record import hide_in_config
+
         assert self.config is not None and self.launcher is not None
+        hide_in_config(self.config)
         batches = self.batches(arguments)
         sweep_dir = Path(self.config.hydra.sweep.dir)
         sweep_dir.mkdir(parents=True, exist_ok=True)

@@ -19,9 +19,12 @@ Every violation found is collected; :class:`ConformanceError` lists them all. Us
     from swarmbox.testing import check_algorithm
 
     def test_my_algorithm(tmp_path):
-        check_algorithm(["algo=my_algo", "mission=my_mission"], workdir=tmp_path)
+        check_algorithm(["algo=my_algo", "mission=my_mission"], workdir=tmp_path, config_dir="conf")
 
-``edit(cfg)`` may shrink the mission (fewer drones, shorter phases) before the runs.
+``config_dir`` is a folder of your own config groups (``conf/algo/my_algo.yaml`` ...), relative to the
+current directory or absolute; it joins the shipped groups as ``swarmbox run --config-dir DIR`` does
+(see docs/user-projects.md). ``edit(cfg)`` may shrink the mission (fewer drones, shorter phases)
+before the runs. From the shell: ``swarmbox check --config-dir conf algo=my_algo``.
 """
 
 from __future__ import annotations
@@ -58,17 +61,23 @@ class ConformanceReport:
 def check_algorithm(overrides: Sequence[str], *, workdir: Path, seed: int = 0,
                     network: dict[str, float] | None = None, expect: str = "ok",
                     edit: Callable[[DictConfig], None] | None = None,
-                    config_dir: Path | None = None) -> ConformanceReport:
-    """Fly the configured algorithm twice and check the contract; raise ConformanceError if broken."""
-    from swarmbox.testing.runs import compose, fly  # Hydra and the runner load only when used
+                    config_dir: str | Path | None = None) -> ConformanceReport:
+    """Fly the configured algorithm twice and check the contract; raise ConformanceError if broken.
+
+    ``config_dir``: your own config groups, added to the shipped ones (relative paths: to the
+    current directory); a directory that does not exist raises FileNotFoundError before any run.
+    """
+    from swarmbox.testing.runs import compose, fly, search_path_override  # Hydra loads only when used
 
     if expect not in ("ok", "any"):
         raise ValueError(f"expect must be 'ok' or 'any', got {expect!r}")
     net = {**DEFAULT_NETWORK, **(network or {})}
     args = [*overrides, f"seed={seed}", "run.progress=false", *(f"network.{k}={v}" for k, v in net.items())]
+    if config_dir is not None:   # resolved once: the two runs compose the same groups
+        args.append(search_path_override(config_dir))
     report = ConformanceReport()
     for label in ("first", "second"):
-        cfg, choices = compose(args, config_dir)
+        cfg, choices = compose(args)
         if edit is not None:
             with open_dict(cfg):
                 edit(cfg)

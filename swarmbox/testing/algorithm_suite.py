@@ -167,7 +167,7 @@ def check_main(argv: list[str] | None = None) -> int:
                    help="ok: the mission must complete; any: an abort with a reason passes too")
     p.add_argument("--workdir", help="keep both runs here (default: a temporary directory, removed "
                    "when the check passes)")
-    args = p.parse_args(argv)
+    args = p.parse_intermixed_args(argv)   # options before, between or after the overrides
     with tempfile.TemporaryDirectory(prefix="swarmbox-check-") as tmp:
         workdir = Path(args.workdir or tmp)
         try:

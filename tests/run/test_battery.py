@@ -216,7 +216,8 @@ def test_sigint_mid_sweep_finishes_the_run_writes_the_summary_and_exits_130(tmp_
     assert summary["counts"] == {"ok": 2, "interrupted": 1} and len(summary["not_started"]) == 3
     assert summary["interrupted_by"] == "SIGINT"
     assert "3 not started" in out and not list(sweep.rglob("*.partial"))
-    assert sorted(p.name for p in sweep.iterdir()) == ["0", "1", "2", "multirun.yaml", "sweep.json"]
+    assert sorted(p.name for p in sweep.iterdir()) == sorted(
+        [*(sweep_job(sweep, s).name for s in range(3)), "multirun.yaml", "sweep.json"])
 
 
 def test_no_vehicle_at_the_configured_port_fails_naming_it(tmp_path):

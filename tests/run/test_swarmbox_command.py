@@ -96,7 +96,7 @@ def test_run_refuses_bad_input_in_one_line_as_python_m_does(tmp_path):
 
 
 def test_check_passes_a_conforming_algorithm_and_fails_a_broken_one(tmp_path):
-    ok = swarmbox("check", *HOVER, "--workdir", str(tmp_path / "ok"))
+    ok = swarmbox("check", HOVER[0], "--workdir", str(tmp_path / "ok"), *HOVER[1:])   # options anywhere
     assert ok.returncode == 0, ok.stderr[-2000:]
     assert ok.stdout.startswith("PASS  algorithm 'hover'")
     assert [json.loads((tmp_path / "ok" / r / "run.json").read_text())["status"]

@@ -337,7 +337,8 @@ def test_fewer_packages_than_drones_every_drone_still_completes(tmp_path):
 
 
 def test_unknown_sort_fails_the_run_with_the_allowed_values(tmp_path):
-    manifest = run_config(tmp_path / "r", ["algo=delivery_distance_dynamic", "algo.params.sort=spiral", *SMALL])
+    manifest = run_config(tmp_path / "r", ["algo=delivery_distance_dynamic", "algo.params.sort=spiral",
+                                           *SMALL])
     assert manifest["status"] == "failed"
     assert "unknown sort 'spiral'; allowed values: none, azimuth, distance" in manifest["reason"]
 

@@ -76,7 +76,11 @@ def _print_run(analysis: RunAnalysis) -> None:
     cols = [c for c in ("drone", "distance_h_m", "busy_s", "utilization", "idle_s", "latency_ms_mean",
                         "loss_ratio", "disc_h_m_max") if c in analysis.drones.columns]
     print(to_markdown(analysis.drones[cols]))
+    if len(analysis.finding):
+        print("finding (from the logs alone):")
+        print(to_markdown(analysis.finding))
     if len(analysis.diagnosis):
+        print(f"scoring against the fault onset ({analysis.onset.name if analysis.onset else 'given'}):")
         print(to_markdown(analysis.diagnosis[["metric", "t_f_s", "tau_d", "sigma_a", "drone", "is_target"]]))
     print(to_markdown(metrics_table(analysis)[["metric", "value", "unit"]]))
 

@@ -1,7 +1,9 @@
 """Write the tables and figures of a run or a sweep (used by the CLI and the Hydra callback).
 
 Run: ``<run>/tables/`` holds metrics (long: metric, value, direction, unit), drones, links, agents,
-clocks, diagnosis, anomalies (every flag), timeline (per drone and window), swarm (per tick),
+clocks, finding (the onset-agnostic diagnosis: first alarm) and alarms (every alarm episode), scoring
+(only with a fault onset: t_f, tau_d, Sigma_a against it), anomalies (every flag), timeline (per drone
+and window), swarm (per tick),
 connectivity (per window), markers, problems; ``<run>/figures/`` holds trajectories,
 one timeline per monitored metric, and the communication graph (up to ``figures.MANY_DRONES``
 drones; larger swarms get density/summary figures instead of one line per drone).
@@ -52,7 +54,9 @@ def write_run(analysis: RunAnalysis, out: Path, with_figures: bool = True) -> li
         ("links", analysis.links, True), ("agents", analysis.agents, True),
         ("clocks", analysis.clocks, True), ("swarm", analysis.swarm, False),
         ("connectivity", analysis.connectivity, False),
-        ("diagnosis", analysis.diagnosis, True), ("anomalies", analysis.flags, False),
+        ("finding", analysis.finding, True), ("alarms", analysis.alarms, False),
+        *((("scoring", analysis.diagnosis, True),) if len(analysis.diagnosis) else ()),
+        ("anomalies", analysis.flags, False),
         ("timeline", analysis.timeline, False), ("markers", analysis.markers, False),
         ("problems", problems_table(analysis.problems), False),
     ):

@@ -15,7 +15,7 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
 from swarmbox.faults.schema import FaultConfig  # generated from the fault models' parameters
-from swarmbox.run import backend_schema
+from swarmbox.run import backend_schema, dirname
 
 GROUPS = ("algo", "mission", "topology", "backend", "network", "fault")
 
@@ -157,6 +157,7 @@ class SwarmConfig:
 
 
 def register() -> None:
+    dirname.register_resolver()   # run directory names (conf/config.yaml: hydra.run.dir, sweep.subdir)
     cs = ConfigStore.instance()
     cs.store(name="base_config", node=SwarmConfig)
     backend_schema.register(cs)

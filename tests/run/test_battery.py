@@ -19,7 +19,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from tests.conftest import ROOT
+from tests.conftest import ROOT, sweep_job
 
 HOVER = ("algo=hover", "mission=hover", "algo.params.hover_s=1", "run.progress=false")
 SAME_POINT = "{0:[0,0],1:[0,0],2:[10,0],3:[15,0]}"
@@ -198,22 +198,26 @@ def test_sigint_mid_sweep_finishes_the_run_writes_the_summary_and_exits_130(tmp_
     for line in proc.stdout:
         ok += line.startswith("OK")
         if ok == 2:
-            while not (sweep / "2" / "config.yaml").exists():
+            deadline = time.monotonic() + 120
+            while not (sweep_job(sweep, 2) / "config.yaml").exists():
+                assert time.monotonic() < deadline and proc.poll() is None
                 time.sleep(0.02)
             time.sleep(0.3)
             proc.send_signal(signal.SIGINT)
             break
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
-    statuses = {d.name: _run_json(d)["status"] for d in sweep.iterdir() if (d / "run.json").exists()}
-    assert statuses == {"0": "ok", "1": "ok", "2": "interrupted"}
-    interrupted = _run_json(sweep / "2")
+    runs = [_run_json(d) for d in sweep.iterdir() if (d / "run.json").exists()]
+    statuses = {m["seed"]: m["status"] for m in runs}
+    assert statuses == {0: "ok", 1: "ok", 2: "interrupted"}
+    interrupted = _run_json(sweep_job(sweep, 2))
     assert interrupted["sim_time_s"] > 0 and "SIGINT" in interrupted["reason"]
     summary = json.loads((sweep / "sweep.json").read_text())
     assert summary["counts"] == {"ok": 2, "interrupted": 1} and len(summary["not_started"]) == 3
     assert summary["interrupted_by"] == "SIGINT"
     assert "3 not started" in out and not list(sweep.rglob("*.partial"))
-    assert sorted(p.name for p in sweep.iterdir()) == ["0", "1", "2", "multirun.yaml", "sweep.json"]
+    assert sorted(p.name for p in sweep.iterdir()) == sorted(
+        [*(sweep_job(sweep, s).name for s in range(3)), "multirun.yaml", "sweep.json"])
 
 
 def test_no_vehicle_at_the_configured_port_fails_naming_it(tmp_path):

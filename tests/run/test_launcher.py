@@ -41,7 +41,8 @@ def command(tmp_path: Path, name: str, *args: str) -> tuple[list[str], dict[str,
     tmp = tmp_path / f"tmp-{name}"
     tmp.mkdir()
     cmd = [sys.executable, "-m", "swarmbox.run", "-m", f"hydra/launcher={name}", "hydra.launcher.n_jobs=2",
-           *HOVER, *args, f"hydra.sweep.dir={tmp_path / name}", "~hydra.callbacks.analyze"]
+           *HOVER, *args, f"hydra.sweep.dir={tmp_path / name}", "~hydra.callbacks.analyze",
+           "hydra.sweep.subdir=${hydra.job.num}"]   # job dirs by number: these tests compare job order
     return cmd, {**os.environ, "TMPDIR": str(tmp)}
 
 

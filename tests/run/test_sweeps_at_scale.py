@@ -16,7 +16,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from tests.conftest import ROOT
+from tests.conftest import ROOT, sweep_job
 
 HOVER = ("algo=hover", "algo.params.hover_s=1", "mission.max_sim_time_s=60")
 
@@ -28,7 +28,9 @@ def swarmbox_run(*args, cwd=ROOT, timeout=600, env=None):
 
 
 def statuses(sweep_dir):
-    return {p.parent.name: json.loads(p.read_text())["status"] for p in sweep_dir.glob("*/run.json")}
+    """seed -> status of every job (jobs are named by their overrides)."""
+    runs = [json.loads(p.read_text()) for p in sweep_dir.glob("*/run.json")]
+    return {str(m["seed"]): m["status"] for m in runs}
 
 
 @pytest.mark.slow
@@ -38,16 +40,17 @@ def test_sweep_shows_progress_and_resume_flies_only_the_rest(tmp_path):
     first = swarmbox_run(*args)
     assert first.returncode == 0, first.stderr[-3000:]
     assert "4/4 runs done, 0 failed" in first.stderr and "ETA" in first.stderr
-    kept = {d: (sweep / d / "run.json").read_bytes() for d in ("0", "1")}
-    shutil.rmtree(sweep / "2")                                  # never flown (interrupted before it)
-    (sweep / "3" / "run.json").write_text(json.dumps({"status": "failed", "overrides": []}))  # cut short
+    jobs = {s: sweep_job(sweep, s) for s in range(4)}
+    kept = {d: (jobs[d] / "run.json").read_bytes() for d in (0, 1)}
+    shutil.rmtree(jobs[2])                                      # never flown (interrupted before it)
+    (jobs[3] / "run.json").write_text(json.dumps({"status": "failed", "overrides": []}))  # cut short
     again = swarmbox_run(*args, "run.resume=true")
     assert again.returncode == 0, again.stderr[-3000:]
     assert again.stdout.count("SKIP") == 2 and again.stdout.count("OK ") == 2
     assert "2/2 runs done, 0 failed, 2 skipped" in again.stderr
-    assert {d: (sweep / d / "run.json").read_bytes() for d in kept} == kept
+    assert {d: (jobs[d] / "run.json").read_bytes() for d in kept} == kept
     assert statuses(sweep) == {"0": "ok", "1": "ok", "2": "ok", "3": "ok"}
-    assert (sweep / "3" / "run.failed-1.json").is_file()
+    assert (jobs[3] / "run.failed-1.json").is_file() and sweep_job(sweep, 2) == jobs[2]   # same name again
 
 
 def comparable(table: pd.DataFrame) -> pd.DataFrame:

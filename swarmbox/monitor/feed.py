@@ -30,15 +30,18 @@ SHOWN_KINDS = frozenset({"marker", "safety", "collision", "fault", "topology", "
                          "proximity", "link", "estimator"})
 
 
-def _field(name: str) -> struct.Struct:
-    """Reads one column of a packed ``messages`` row (:mod:`swarmbox.core.rows`) in place."""
-    codes = [("i" if code == "T" else code) for _, code in MESSAGE_FIELDS]
-    i = [n for n, _ in MESSAGE_FIELDS].index(name)
-    return struct.Struct(f"<{struct.calcsize('<' + ''.join(codes[:i]))}x{codes[i]}")
+def _fields(*names: str) -> struct.Struct:
+    """Reads the named columns of a packed ``messages`` row (:mod:`swarmbox.core.rows`) in one call,
+    in place; the others are skipped as padding."""
+    layout = "<"
+    for name, code in MESSAGE_FIELDS:
+        code = "i" if code == "T" else code
+        layout += code if name in names else f"{struct.calcsize('<' + code)}x"
+    return struct.Struct(layout.rstrip("0123456789x") or "<")
 
 
-_KIND, _TYPE, _SRC = _field("kind"), _field("type"), _field("src")
-_T_RECV, _T_SENT = _field("t_s"), _field("t_sent_s")
+_KIND_TYPE_SRC = _fields("kind", "type", "src")
+_T_SENT = _fields("t_s", "t_sent_s")
 _REPORT = MESSAGE_TYPE_CODES[Report]
 
 
@@ -101,12 +104,12 @@ class GroundFeed:
 
     def message_sink(self) -> Callable[[bytes], None]:
         """Keeps the ground's latest ``recv`` row of each drone's Report (packed; read when needed)."""
-        arrivals = self.arrivals
-        kind, mtype, src = _KIND.unpack_from, _TYPE.unpack_from, _SRC.unpack_from
+        arrivals, read = self.arrivals, _KIND_TYPE_SRC.unpack_from
 
         def sink(row: bytes) -> None:
-            if kind(row)[0] == RECV and mtype(row)[0] == _REPORT:
-                arrivals[src(row)[0]] = row
+            kind, mtype, src = read(row)
+            if kind == RECV and mtype == _REPORT:
+                arrivals[src] = row
         return sink
 
     def stage_sink(self, node_id: int) -> Callable[[tuple], None]:
@@ -136,9 +139,10 @@ def snapshot(ground: Any, wall_s: float, ticks_ago: int = 0, arrivals: dict[int,
 
 def _latency(report: Report, recv_row: bytes | None) -> float | None:
     """Receive - send time of ``report`` if ``recv_row`` is its arrival (both on the nodes' clocks)."""
-    if recv_row is None or _T_SENT.unpack_from(recv_row)[0] != report.t_sent_s:
+    if recv_row is None:
         return None
-    return _T_RECV.unpack_from(recv_row)[0] - report.t_sent_s
+    t_recv, t_sent = _T_SENT.unpack_from(recv_row)
+    return t_recv - t_sent if t_sent == report.t_sent_s else None
 
 
 class _TappedLog:

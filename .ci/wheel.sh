@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # CI: build the wheel, install it into a clean virtual environment, and fly the default mission
 # from an empty directory with the `swarmbox` console command (no source tree on the path).
+# PYTHON (default python3) builds the wheel.
 set -euo pipefail
+PYTHON=${PYTHON:-python3}
 repo="$(cd "$(dirname "$0")/.." && pwd)"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
-python3 -m pip wheel --quiet --disable-pip-version-check --no-deps -w "$work/dist" "$repo"
+"$PYTHON" -m pip wheel --quiet --disable-pip-version-check --no-deps -w "$work/dist" "$repo"
 python3 -m venv "$work/venv"
 "$work/venv/bin/pip" install --quiet --disable-pip-version-check "$work"/dist/swarmbox-*.whl
 mkdir "$work/empty"

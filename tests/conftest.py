@@ -60,3 +60,11 @@ def table(run_dir: Path, node: str, name: str):
     import pandas as pd
 
     return pd.read_parquet(run_dir / "logs" / node / f"{name}.parquet")
+
+
+def sweep_job(sweep_dir: Path, seed: int) -> Path:
+    """The directory of a sweep's job with ``seed=<seed>`` among its overrides (jobs are named by their
+    overrides, swarmbox/run/dirname.py); a path that does not exist when that job has none yet."""
+    found = [p for p in Path(sweep_dir).glob("*") if f"seed={seed}" in p.name.split(",")]
+    assert len(found) <= 1, found
+    return found[0] if found else Path(sweep_dir) / f"<no job with seed={seed}>"

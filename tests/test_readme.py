@@ -16,9 +16,9 @@ import sys
 from pathlib import Path
 
 import pytest
-from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
+from swarmbox.run.sweeper import sweep_jobs
 from tests import realtime
 from tests.conftest import ROOT, compose_config
 
@@ -57,7 +57,7 @@ def jobs(args: list[str]) -> list[list[str]]:
     if "-m" not in args:
         return [overrides]
     parsed = OverridesParser.create().parse_overrides(overrides)
-    return BasicSweeper.split_arguments(parsed, None)[0]
+    return sweep_jobs(parsed, None)[0]
 
 
 @pytest.mark.parametrize("args", RUNS, ids=" ".join)
@@ -125,3 +125,37 @@ def test_every_readme_command_runs(tmp_path):
     proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
                           env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
+
+
+# CI runs the "Two commands" block as written (.ci/readme.sh): the extraction is checked here.
+
+def readme_commands(readme: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(ROOT / ".ci" / "readme_commands.py"), str(readme)],
+                          capture_output=True, text=True, timeout=60)
+
+
+def test_ci_extracts_exactly_the_two_commands_of_the_readme_verbatim():
+    proc = readme_commands(ROOT / "README.md")
+    assert proc.returncode == 0, proc.stderr
+    install, test = proc.stdout.splitlines()
+    assert install.startswith("pip install -e '.[test]' && python -m swarmbox.run")
+    assert test.split("#")[0].split() == ["python", "-m", "pytest"]
+    section = README.split("## Two commands", 1)[1].split("\n## ", 1)[0]
+    assert f"\n{install}\n" in section and f"\n{test}\n" in section      # whole lines, unchanged
+
+
+@pytest.mark.parametrize("text, cause", [
+    ("# SwarmBox\n\n## Install\n\n```bash\npip install swarmbox\npytest\n```\n",
+     "no '## Two commands' section"),
+    ("## Two commands\n\nSee below.\n\n## Tour\n\n```bash\npip install .\npytest\n```\n", "no ```bash block"),
+    ("## Two commands\n\n```bash\npip install .\n# a comment\n```\n", "1 commands"),
+    ("## Two commands\n\n```bash\npip install .\npython -m pytest\nmake\n```\n", "3 commands"),
+])
+def test_ci_refuses_a_readme_without_its_two_commands(tmp_path, text, cause):
+    (tmp_path / "README.md").write_text(text)
+    proc = readme_commands(tmp_path / "README.md")
+    assert proc.returncode == 2 and cause in proc.stderr and not proc.stdout
+    job = subprocess.run(["bash", str(ROOT / ".ci" / "readme.sh"), str(tmp_path), str(tmp_path / "venv")],
+                         capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
+    assert job.returncode == 2 and cause in job.stderr
+    assert not (tmp_path / "venv").exists()                  # refused before any install

@@ -156,13 +156,16 @@ def _load_yaml(path: Path) -> dict:
 
 
 def _config_files(conf: Path, name: str) -> list[Path]:
-    """The algo YAML ``name`` and the algo YAMLs it extends through ``defaults``, base first."""
-    path = conf / f"{name}.yaml"
+    """The algo YAML ``name`` and the YAMLs it extends through ``defaults``, base first (a ``/base``
+    entry is a file at the config root, e.g. ``conf/delivery_base.yaml``)."""
+    path = conf / f"{name}.yaml" if not name.startswith("/") else conf.parent / f"{name[1:]}.yaml"
     raw = _load_yaml(path)
     files: list[Path] = []
     for entry in raw.get("defaults") or []:
-        if isinstance(entry, str) and entry != "_self_" and (conf / f"{entry}.yaml").is_file():
-            files += [f for f in _config_files(conf, entry) if f not in files]
+        ref = entry.split("@")[0] if isinstance(entry, str) else ""
+        base = conf.parent / f"{ref[1:]}.yaml" if ref.startswith("/") else conf / f"{ref}.yaml"
+        if ref and ref != "_self_" and base.is_file():
+            files += [f for f in _config_files(conf, ref) if f not in files]
     return [*files, path]
 
 

@@ -23,7 +23,7 @@ All commands are reliable (acknowledged and re-sent), so a lost message cannot s
 Packages of a drone that is lost are not handed to another one: the mission then ends with the
 EXECUTION timeout (status aborted, with the reason).
 
-Params (``conf/algo/delivery_base.yaml``): ``sort`` (none | azimuth | distance), ``assign`` (block |
+Params (``conf/delivery_base.yaml``): ``sort`` (none | azimuth | distance), ``assign`` (block |
 rr | dynamic), ``cruise_altitude_m``, ``altitude_step_m``, ``arrival_tolerance_m``,
 ``arrival_speed_m_s``. Markers: ground ``plan`` (sort, assign, packages, order), ``assigned`` (drone,
 packages), ``delivered`` (package, drone, count), ``duplicate`` (package, drone, first_drone);
@@ -70,7 +70,7 @@ __all__ = ["DeliveryDrone", "DeliveryGround", "paper_points", "random_points"]
 
 @dataclass
 class DeliveryParams:
-    """Typed ``params`` (see ``conf/algo/delivery_base.yaml``)."""
+    """Typed ``params`` (see ``conf/delivery_base.yaml``)."""
 
     sort: str = 'distance'   # none | azimuth | distance (from the origin)
     assign: str = 'dynamic'   # block | rr | dynamic

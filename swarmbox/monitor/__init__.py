@@ -2,8 +2,8 @@
 
 ``run.monitor``: ``auto`` (default) shows it for real-time backends (PX4, MAVLink vehicles) when
 stderr is a terminal and the run is not part of a sweep; ``on`` always; ``off`` never.
-``run.monitor_hz`` sets the refresh rate. ``run.rerun`` (a Rerun viewer's URL or an ``.rrd`` path)
-also streams the run live to Rerun. See docs/monitor.md.
+``run.monitor_hz`` sets the refresh rate. ``run.rerun`` (a Rerun viewer's URL or an ``.rrd`` path;
+a relative path is inside the run directory) also streams the run live to Rerun. See docs/monitor.md.
 
 This module decides without importing rich; the dashboard itself lives in :mod:`.live`.
 """
@@ -11,9 +11,12 @@ This module decides without importing rich; the dashboard itself lives in :mod:`
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 from typing import Any
 
 MODES = ("auto", "on", "off")
+#: ``run.rerun`` values that name a viewer to connect to rather than a file to write.
+VIEWER_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
 
 
 def wanted(mode: str, *, realtime: bool, multirun: bool, tty: bool | None = None) -> bool:
@@ -26,8 +29,21 @@ def wanted(mode: str, *, realtime: bool, multirun: bool, tty: bool | None = None
     return realtime and tty and not multirun
 
 
-def create(title: str, rate_hz: float, *, dashboard: bool = True, rerun: str | None = None) -> Any:
-    """The run's monitor: the dashboard, a live Rerun stream (``run.rerun``), or both."""
+def rerun_target(value: str, run_dir: Path) -> str:
+    """Where ``run.rerun`` streams to: a viewer's URL as given; a relative ``.rrd`` path inside the
+    run directory (like everything else a run writes), an absolute one as given."""
+    if value.startswith(VIEWER_SCHEMES):
+        return value
+    path = Path(value).expanduser()
+    return str(path if path.is_absolute() else run_dir / path)
+
+
+def create(title: str, rate_hz: float, *, dashboard: bool = True, rerun: str | None = None,
+           run_dir: Path | None = None) -> Any:
+    """The run's monitor: the dashboard, a live Rerun stream (``run.rerun``), or both.
+    ``run_dir``: where a relative ``run.rerun`` path goes (the current directory without one)."""
     from swarmbox.monitor.live import Monitor
 
+    if rerun and run_dir is not None:
+        rerun = rerun_target(rerun, run_dir)
     return Monitor(title, rate_hz=rate_hz, dashboard=dashboard, rerun=rerun)

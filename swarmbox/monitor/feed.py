@@ -8,22 +8,41 @@ only ever reads the latest snapshot and the event queue, so it never touches liv
 tick loop never waits for it.
 
 Events reach the monitor through :class:`TappedRecorder`: the event rows the nodes of this process
-log anyway (the ground's own, and the drones' when they run here) are also put on a queue.
+log anyway (the ground's own, and the drones' when they run here) are also put on a queue. The
+ground's ``recv`` rows of Reports are read too (a few bytes of each, on the tick thread), so the
+dashboard's link latency is the analyzer's: the row's receive time - send time of the latest Report.
 """
 
 from __future__ import annotations
 
+import struct
 import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from swarmbox.core.messages import GROUND_ID, DescendantState, Report
+from swarmbox.core.messages import GROUND_ID, MESSAGE_TYPE_CODES, DescendantState, Report
+from swarmbox.core.rows import MESSAGE_FIELDS, RECV
 
 #: Event kinds worth a line on the dashboard (``progress`` and ``command`` are too chatty).
 SHOWN_KINDS = frozenset({"marker", "safety", "collision", "fault", "topology", "failsafe", "error",
                          "proximity", "link", "estimator"})
+
+
+def _fields(*names: str) -> struct.Struct:
+    """Reads the named columns of a packed ``messages`` row (:mod:`swarmbox.core.rows`) in one call,
+    in place; the others are skipped as padding."""
+    layout = "<"
+    for name, code in MESSAGE_FIELDS:
+        code = "i" if code == "T" else code
+        layout += code if name in names else f"{struct.calcsize('<' + code)}x"
+    return struct.Struct(layout.rstrip("0123456789x") or "<")
+
+
+_KIND_TYPE_SRC = _fields("kind", "type", "src")
+_T_SENT = _fields("t_s", "t_sent_s")
+_REPORT = MESSAGE_TYPE_CODES[Report]
 
 
 @dataclass(frozen=True, slots=True)
@@ -35,6 +54,7 @@ class DroneRow:
     silent_ticks: int
     received: int           # Reports received so far
     report: Report          # the latest one
+    latency_s: float | None = None   # its receive - send time (the ground's recv row), if known
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,6 +82,7 @@ class GroundFeed:
         self.events: deque[tuple[int, tuple]] = deque(maxlen=max_events)
         self.snapshot_cost_s = 0.0     # tick-thread time spent taking snapshots
         self.snapshots = 0
+        self.arrivals: dict[int, bytes] = {}   # drone -> the ground's recv row of its latest Report
         self._next = 0.0
 
     def after_tick(self, ground: Any) -> None:
@@ -69,7 +90,7 @@ class GroundFeed:
         if now < self._next:
             return
         self._next = now + self.period_s
-        self.latest = snapshot(ground, now)
+        self.latest = snapshot(ground, now, arrivals=self.arrivals)
         self.snapshots += 1
         self.snapshot_cost_s += time.perf_counter() - now
 
@@ -81,6 +102,16 @@ class GroundFeed:
                 push((node_id, row))
         return sink
 
+    def message_sink(self) -> Callable[[bytes], None]:
+        """Keeps the ground's latest ``recv`` row of each drone's Report (packed; read when needed)."""
+        arrivals, read = self.arrivals, _KIND_TYPE_SRC.unpack_from
+
+        def sink(row: bytes) -> None:
+            kind, mtype, src = read(row)
+            if kind == RECV and mtype == _REPORT:
+                arrivals[src] = row
+        return sink
+
     def stage_sink(self, node_id: int) -> Callable[[tuple], None]:
         push = self.events.append
 
@@ -89,11 +120,14 @@ class GroundFeed:
         return sink
 
 
-def snapshot(ground: Any, wall_s: float, ticks_ago: int = 0) -> Snapshot:
-    """The ground's state; ``ticks_ago`` = 1 when taken after the loop has already advanced time."""
+def snapshot(ground: Any, wall_s: float, ticks_ago: int = 0, arrivals: dict[int, bytes] | None = None,
+             ) -> Snapshot:
+    """The ground's state; ``ticks_ago`` = 1 when taken after the loop has already advanced time;
+    ``arrivals``: the feed's recv rows, for each latest Report's latency."""
     rows, direct = [], set()
     for drone_id, inf in list(ground.inferiors.items()):
-        rows.append(DroneRow(drone_id, inf.alive, inf.silent_ticks, inf.received, inf.report))
+        rows.append(DroneRow(drone_id, inf.alive, inf.silent_ticks, inf.received, inf.report,
+                             _latency(inf.report, arrivals.get(drone_id)) if arrivals else None))
         direct.add(drone_id)
     forwarded = tuple(d for r in rows if r.alive for d in r.report.descendants if d.drone_id not in direct)
     _, alive = ground.head_count()
@@ -101,6 +135,14 @@ def snapshot(ground: Any, wall_s: float, ticks_ago: int = 0) -> Snapshot:
                     ground.tick_s, ground.stage.name,
                     ground.stage_tick * ground.tick_s, ground.reason, ground.mission.swarm_size,
                     tuple(rows), forwarded, tuple(ground.prox_pairs.items()), alive)
+
+
+def _latency(report: Report, recv_row: bytes | None) -> float | None:
+    """Receive - send time of ``report`` if ``recv_row`` is its arrival (both on the nodes' clocks)."""
+    if recv_row is None:
+        return None
+    t_recv, t_sent = _T_SENT.unpack_from(recv_row)
+    return t_recv - t_sent if t_sent == report.t_sent_s else None
 
 
 class _TappedLog:
@@ -136,6 +178,7 @@ class TappedRecorder:
             sinks = {"events": self._feed.event_sink(node_id)}
             if node_id == GROUND_ID:
                 sinks["stages"] = self._feed.stage_sink(node_id)
+                sinks["messages"] = self._feed.message_sink()
             self._logs[node_id] = _TappedLog(self._recorder.node(node_id), sinks)
         return self._logs[node_id]
 

@@ -73,7 +73,7 @@ class Monitor:
         except Exception as exc:  # a broken screen must not touch the run: stop drawing, say why
             self.error = f"{type(exc).__name__}: {exc}"
 
-    def _frame(self) -> None:
+    def _frame(self, final: bool = False) -> None:
         t0 = time.thread_time()
         self._wakeups += 1
         news = bool(self.feed.events)
@@ -85,7 +85,7 @@ class Monitor:
         snap = self.feed.latest
         fresh = snap is not None and snap is not self.view.snap
         if snap is not None:
-            self.view.update(snap)
+            self.view.update(snap, final)
         if self.stream is not None and fresh:
             self.stream.snapshot(snap, self.view)
         if self._screen is not None and self._screen.live:   # a plain stream gets the last frame only
@@ -105,9 +105,10 @@ class Monitor:
         ground = swarm.ground if swarm is not None else ground
         if ground is not None:
             ground.observer = None
-            self.feed.latest = snapshot(ground, time.perf_counter(), ticks_ago=1)   # the final state
+            self.feed.latest = snapshot(ground, time.perf_counter(), ticks_ago=1,   # the final state
+                                        arrivals=self.feed.arrivals)
         if not self.error:
-            self._frame()
+            self._frame(final=True)
         if self._screen is not None:
             t0 = time.thread_time()
             if not self._screen.live:

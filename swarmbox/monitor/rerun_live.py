@@ -1,19 +1,22 @@
 """Stream a run live to a Rerun viewer (or an ``.rrd`` file) from the monitor's snapshots.
 
 ``run.rerun=rerun+http://127.0.0.1:9876/proxy`` sends to a viewer started with ``rerun``;
-``run.rerun=live.rrd`` writes the stream to a file. Like the dashboard, it reads only the ground's
-snapshots and logged events, on the monitor thread: drones' reported positions, the ground's link to
-each drone as a line (green alive, red lost), per-drone Report latency and loss, stages and events.
+``run.rerun=live.rrd`` writes the stream to ``<run dir>/live.rrd``. Like the dashboard, it reads only
+the ground's snapshots and logged events, on the monitor thread: drones' reported positions, the
+ground's link to each drone as a line (green alive, red lost), per-drone Report latency and loss,
+stages and events.
 The full-detail replay of a finished run is ``python -m swarmbox.export`` (docs/monitor.md).
 """
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import rerun as rr
 
+from swarmbox.monitor import VIEWER_SCHEMES
 from swarmbox.monitor.feed import Snapshot
 from swarmbox.monitor.view import DashboardView
 
@@ -27,9 +30,10 @@ class RerunStream:
 
     def __init__(self, target: str, name: str) -> None:
         self.rec = rr.RecordingStream("swarmbox", recording_id=f"live-{name}")
-        if target.startswith(("rerun://", "rerun+http://", "rerun+https://")):
+        if target.startswith(VIEWER_SCHEMES):
             self.rec.connect_grpc(target)
         else:
+            Path(target).parent.mkdir(parents=True, exist_ok=True)
             self.rec.save(target)
         self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         self.rec.log("world/ground", rr.Points3D([[0.0, 0.0, 0.0]], radii=0.5, labels="ground"), static=True)

@@ -2,20 +2,28 @@
 
 Per drone, over the last ``window_s`` seconds of ground time:
 
-- link latency: mean of (arrival - send time) of the latest Report at each snapshot; the arrival is
-  known to the tick (the ground reads its inbox once per tick), so values are tick-quantised;
+- link latency: mean, over the snapshots, of the latest Report's receive time - send time, the
+  analyzer's definition (docs/analysis.md) on the nodes' own clocks: the receive time is the
+  ground's ``recv`` row, the instant the network delivered it, not the tick the ground read it at
+  (an ideal network shows 0 ms);
 - link loss: 1 - Reports received / ground ticks elapsed (a drone sends one Report per tick);
 - GNSS - estimate: the latest discrepancy the drone reported (sent with each new GNSS fix).
 
 Drones are *alive* while their Reports arrive, *LOST* once the ground declared them lost, and
 *waiting* before their first Report.
+
+One clock: an event is shown once the snapshot's ground clock has reached its time (or after two
+new snapshots, for a node whose clock runs ahead), so the header never trails the events under it. Events
+that repeat (the same node, kind, name and subject, e.g. a marker every second) share one line with
+their count and latest values. Numbers are rounded to what the eye can use, never ``-0.0``.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
-from collections import deque
+from collections import OrderedDict, deque
 from dataclasses import dataclass, field
 
 from swarmbox.core.stages import Stage
@@ -31,6 +39,26 @@ class _History:
     disc_m: float | None = None
 
 
+@dataclass
+class _Shown:
+    """One line of the event pane: an event and how often it repeated."""
+
+    first_t_s: float
+    t_s: float
+    node: str
+    text: str
+    count: int = 1
+
+    def line(self) -> str:
+        again = f"   (x{self.count} since {_num(self.first_t_s, 0, 2)})" if self.count > 1 else ""
+        return f"{_num(self.t_s, 8, 2)}  {self.node:<8} {self.text}{again}".replace("\n", " ")
+
+
+#: Event kinds whose every row is news (never folded into an earlier line).
+_EPISODES = frozenset({"stage", "proximity"})
+_unique = itertools.count()
+
+
 def _node(node_id: int) -> str:
     return "ground" if node_id == -1 else f"drone {node_id}"
 
@@ -42,14 +70,22 @@ class DashboardView:
         self.title, self.window_s = title, window_s
         self.max_rows = max_rows
         self.history: dict[int, _History] = {}
-        self.events: deque[str] = deque(maxlen=max_events)
+        self.max_events = max_events
+        self.events: OrderedDict[tuple, _Shown] = OrderedDict()   # shown, oldest first
+        self._pending: deque[list] = deque()   # [t_s, key, node, text, snapshots waited], not shown yet
         self.snap: Snapshot | None = None
         self._prev: Snapshot | None = None
         self.tick_hz = 0.0
 
     # -- input ----------------------------------------------------------------------------------
-    def update(self, snap: Snapshot) -> None:
-        if self.snap is snap:
+    def update(self, snap: Snapshot, final: bool = False) -> None:
+        """Take a new snapshot; shows the events its clock has reached (``final``: all of them)."""
+        fresh = self.snap is not snap
+        if fresh:
+            for item in self._pending:   # snapshots an event has waited through
+                item[4] += 1
+        self._release(math.inf if final else snap.t_s)
+        if not fresh:
             return
         self._prev, self.snap = self.snap, snap
         if self._prev is not None and snap.wall_s > self._prev.wall_s:
@@ -58,9 +94,8 @@ class DashboardView:
         for row in snap.drones:
             h = self.history.setdefault(row.drone_id, _History())
             rep = row.report
-            if row.alive:
-                arrival = snap.t_s - max(row.silent_ticks - 1, 0) * snap.tick_s
-                h.latency.append((snap.t_s, arrival - rep.t_sent_s))
+            if row.alive and row.latency_s is not None:
+                h.latency.append((snap.t_s, row.latency_s))
             h.counts.append((snap.t_s, snap.tick, row.received))
             if rep.discrepancy_ned_m is not None:
                 h.disc_m = math.hypot(*rep.discrepancy_ned_m)
@@ -70,6 +105,8 @@ class DashboardView:
                 h.counts.popleft()
 
     def add_event(self, node_id: int, row: tuple) -> str:
+        """Queue an event row for the pane (shown by the next :meth:`update` that reaches its time);
+        returns its text."""
         t_s, _, kind, name, subject, data = row[:6]
         if kind == "stage":
             text = f"stage {name}" + (f": {data}" if data else "")
@@ -78,9 +115,23 @@ class DashboardView:
         else:
             about = "" if subject in (NO_SUBJECT, node_id) else f" ({_node(subject)})"
             text = f"{kind}/{name}{about}{_short(data)}"
-        line = f"{t_s:8.2f}  {_node(node_id):<8} {text}".replace("\n", " ")
-        self.events.append(line)
-        return line
+        key = (next(_unique),) if kind in _EPISODES else (node_id, kind, name, subject)
+        self._pending.append([t_s, key, _node(node_id), text, 0])
+        return f"{_num(t_s, 8, 2)}  {_node(node_id):<8} {text}".replace("\n", " ")
+
+    def _release(self, until_s: float) -> None:
+        """Show the pending events up to ``until_s``, and those that already waited through two new
+        snapshots (a node whose clock runs ahead of the ground's must not hold the pane back)."""
+        while self._pending and (self._pending[0][0] <= until_s + 1e-9 or self._pending[0][4] >= 2):
+            t_s, key, node, text, _ = self._pending.popleft()
+            shown = self.events.pop(key, None)
+            if shown is None:
+                shown = _Shown(t_s, t_s, node, text)
+            else:
+                shown.t_s, shown.text, shown.count = t_s, text, shown.count + 1
+            self.events[key] = shown   # to the bottom: the latest
+            while len(self.events) > self.max_events:
+                self.events.popitem(last=False)
 
     # -- numbers --------------------------------------------------------------------------------
     def latency_ms(self, drone_id: int) -> float | None:
@@ -109,13 +160,15 @@ class DashboardView:
     def _header(self, snap: Snapshot) -> list[Line]:
         lost = sum(1 for r in snap.drones if not r.alive)
         stage_style = "bold red" if snap.stage == Stage.ABORT.name else "bold green"
+        in_stage = _num(snap.stage_time_s, 0, 1)
         second: Line = (("stage ", ""), (snap.stage, stage_style),
-                        (f" {snap.stage_time_s:.1f} s   drones {snap.alive}/{snap.swarm_size} alive", ""))
+                        (f" {in_stage} s   drones {snap.alive}/{snap.swarm_size} alive", ""))
         if lost:
             second += ((f"   {lost} lost", "bold red"),)
-        out = [((self.title, "bold"), (f"   t {snap.t_s:.1f} s   {self.tick_hz:.0f} ticks/s", "")), second]
+        clock = f"   t {_num(snap.t_s, 0, 1)} s   {_num(self.tick_hz, 0, 0)} ticks/s"
+        out = [((self.title, "bold"), (clock, "")), second]
         if snap.prox:
-            pairs = ", ".join(f"{a}-{b} {d:.1f} m" for (a, b), d in snap.prox[:6])
+            pairs = ", ".join(f"{a}-{b} {_num(d, 0, 1)} m" for (a, b), d in snap.prox[:6])
             out.append(((f"PROXIMITY {pairs}", "bold yellow"),))
         return out
 
@@ -134,20 +187,20 @@ class DashboardView:
             lat, loss = self.latency_ms(row.drone_id), self.loss(row.drone_id)
             hist = self.history.get(row.drone_id)
             link = (("alive", "green") if row.alive
-                    else ("LOST " + format(row.silent_ticks * snap.tick_s, ".1f") + "s", "bold red"))
+                    else ("LOST " + _num(row.silent_ticks * snap.tick_s, 0, 1) + "s", "bold red"))
             out.append(((f"{row.drone_id:>5}  ", "bold yellow" if row.drone_id in near else ""),
                         (f"{link[0]:<11}", link[1]),
-                        (f"{_stage(rep.stage):<12}{n:8.1f}{e:8.1f}{-d + 0.0:7.1f}"
-                         f"{math.hypot(*rep.vel_ned_m_s):6.1f}{_num(lat, '{:8.1f}')}"
-                         f"{_num(None if loss is None else 100 * loss, '{:8.1f}')}"
-                         f"{_num(hist.disc_m if hist else None, '{:8.2f}')}", "")))
+                        (f"{_stage(rep.stage):<12}{_num(n, 8, 1)}{_num(e, 8, 1)}{_num(-d, 7, 1)}"
+                         f"{_num(math.hypot(*rep.vel_ned_m_s), 6, 1)}{_num(lat, 8, 1)}"
+                         f"{_num(None if loss is None else 100 * loss, 8, 1)}"
+                         f"{_num(hist.disc_m if hist else None, 8, 2)}", "")))
         for fw in snap.forwarded:
             if shown >= self.max_rows:
                 break
             shown += 1
             n, e, d = fw.pos_ned_m
             out.append(((f"{fw.drone_id:>5}  ", ""), (f"{'via sup.':<11}", "cyan"),
-                        (f"{_stage(fw.stage):<12}{n:8.1f}{e:8.1f}{-d + 0.0:7.1f}", "")))
+                        (f"{_stage(fw.stage):<12}{_num(n, 8, 1)}{_num(e, 8, 1)}{_num(-d, 7, 1)}", "")))
         joined = {r.drone_id for r in snap.drones} | {f.drone_id for f in snap.forwarded}
         hidden, waiting = len(joined) - shown, snap.swarm_size - len(joined)
         notes = [f"{hidden} more not shown" if hidden > 0 else "",
@@ -157,7 +210,7 @@ class DashboardView:
         return out
 
     def _events(self) -> list[Line]:
-        body = list(self.events) or ["(none yet)"]
+        body = [shown.line() for shown in self.events.values()] or ["(none yet)"]
         return [(("── events " + "─" * 60, "dim"),), *(((line, ""),) for line in body)]
 
 
@@ -168,10 +221,27 @@ def _stage(code: int) -> str:
         return str(code)
 
 
-def _num(value: float | None, fmt: str) -> str:
+def _num(value: float | None, width: int, decimals: int) -> str:
+    """``value`` right-aligned in ``width`` with ``decimals``; ``-`` when unknown; never ``-0.0``."""
     if value is None or not math.isfinite(value):
-        return fmt.format(float("nan")).replace("nan", "  -")
-    return fmt.format(value)
+        return f"{'-':>{width}}"
+    return f"{round(value, decimals) + 0.0:{width}.{decimals}f}"   # + 0.0: a rounded -0.0 becomes 0.0
+
+
+def _round(value: object) -> object:
+    """An event field as the pane shows it: floats to 3 significant digits (all their integer digits,
+    at most 6 decimals), inside lists and dicts too."""
+    if isinstance(value, float):
+        if value == 0 or not math.isfinite(value):
+            return value + 0.0
+        decimals = min(6, max(0, 2 - math.floor(math.log10(abs(value)))))
+        text = f"{round(value, decimals) + 0.0:.{decimals}f}"
+        return text.rstrip("0").rstrip(".") if "." in text else text
+    if isinstance(value, list):
+        return "[" + ", ".join(str(_round(v)) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k}: {_round(v)}" for k, v in value.items()) + "}"
+    return value
 
 
 def _proximity(name: str, data: str) -> str:
@@ -182,9 +252,9 @@ def _proximity(name: str, data: str) -> str:
         return f"proximity/{name}"
     if name == "prox_start":
         how = "predicted" if f.get("predicted") else "closer than the limit"
-        return f"PROXIMITY {a}-{b} {f.get('distance_m', float('nan')):.1f} m ({how})"
-    return (f"proximity {a}-{b} over: closest {f.get('min_distance_m', float('nan')):.1f} m, "
-            f"{f.get('duration_s', float('nan')):.1f} s")
+        return f"PROXIMITY {a}-{b} {_num(f.get('distance_m'), 0, 1)} m ({how})"
+    return (f"proximity {a}-{b} over: closest {_num(f.get('min_distance_m'), 0, 1)} m, "
+            f"{_num(f.get('duration_s'), 0, 1)} s")
 
 
 def _short(data: str, limit: int = 70) -> str:
@@ -194,5 +264,5 @@ def _short(data: str, limit: int = 70) -> str:
         return f" {data[:limit]}"
     if not fields:
         return ""
-    text = " " + " ".join(f"{k}={v}" for k, v in fields.items())
+    text = " " + " ".join(f"{k}={_round(v)}" for k, v in fields.items())
     return text if len(text) <= limit else text[: limit - 1] + "…"

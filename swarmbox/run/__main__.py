@@ -28,7 +28,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig
 
-from swarmbox.run import claims, interrupt, mode, record, sweep_state
+from swarmbox.run import claims, interrupt, record, sweep_state
 from swarmbox.run.checks import INPUT_ERRORS
 from swarmbox.run.config import register
 from swarmbox.run.resume import ResumeMismatchError, finished_run
@@ -119,7 +119,6 @@ def cli() -> None:
         sys.argv.remove("--verbose")
         os.environ["SWARMBOX_VERBOSE"] = "1"
     interrupt.install()
-    mode.install()
     real, held = sys.stderr, io.StringIO()
 
     def release() -> None:

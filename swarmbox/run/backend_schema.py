@@ -3,8 +3,9 @@
 One source of truth, as for faults: :class:`~swarmbox.hal.sim.params.SimParams`,
 :class:`~swarmbox.hal.px4.backend.Px4Params` (+ :class:`~swarmbox.hal.px4.sitl.SitlOptions`) and
 :class:`~swarmbox.hal.mavsim.backend.MavsimOptions` define each key and its type; this module turns
-them into OmegaConf structured configs, stored in Hydra's ConfigStore as ``backend/<name>_schema``
-and listed first in each ``conf/backend/<name>.yaml``. So ``backend.mpc_xy_vel_max_m_s=fast`` or
+them into OmegaConf structured configs, stored in Hydra's ConfigStore as ``backend_<name>_schema``
+(outside the ``backend`` group: a schema is no option) and listed first in each
+``conf/backend/<name>.yaml``. So ``backend.mpc_xy_vel_max_m_s=fast`` or
 ``backend.max_speedd=5`` fails while the config is composed, with Hydra naming the key, and
 :data:`PARAMS` lets the runner check value ranges before a run directory exists.
 """
@@ -100,4 +101,6 @@ SCHEMAS: dict[str, type] = {"sim": SimBackendConfig, "px4": Px4BackendConfig, "m
 
 def register(cs: Any) -> None:
     for name, schema in SCHEMAS.items():
-        cs.store(group="backend", name=f"{name}_schema", node=schema)
+        # outside the backend group, so that a schema is no backend= option (conf/backend/*.yaml
+        # start from it as /backend_<name>_schema@_here_)
+        cs.store(name=f"backend_{name}_schema", node=schema)

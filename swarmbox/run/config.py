@@ -15,7 +15,7 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
 from swarmbox.faults.schema import FaultConfig  # generated from the fault models' parameters
-from swarmbox.run import backend_schema
+from swarmbox.run import backend_schema, dirname
 
 GROUPS = ("algo", "mission", "topology", "backend", "network", "fault")
 
@@ -131,6 +131,7 @@ class RunConfig:
     monitor: str = "auto"           # live dashboard: auto (real-time backends, on a terminal) | on | off
     monitor_hz: float = 2.0         # Hz, dashboard refresh rate
     # stream live to Rerun: a viewer's URL (rerun+http://127.0.0.1:9876/proxy) or an .rrd path
+    # (a relative path is inside the run directory)
     rerun: Optional[str] = None
     out_dir: Optional[str] = None   # default: Hydra's output directory
     # wall s one hook call may take before the run fails naming it; null: off. Always off when the
@@ -157,6 +158,7 @@ class SwarmConfig:
 
 
 def register() -> None:
+    dirname.register_resolver()   # run directory names (conf/config.yaml: hydra.run.dir, sweep.subdir)
     cs = ConfigStore.instance()
     cs.store(name="base_config", node=SwarmConfig)
     backend_schema.register(cs)

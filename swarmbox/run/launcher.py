@@ -1,5 +1,6 @@
-"""The sweep launcher ``hydra/launcher=swarmbox``: Hydra's joblib launcher with its context shipped
-once per launch, not once per job.
+"""The sweep launcher ``hydra/launcher=swarmbox``: Hydra's joblib launcher's jobs, with their context
+shipped once per launch, not once per job, on public APIs only (Hydra's ``Launcher`` plugin and
+``hydra.core.utils``, ``joblib.Parallel``, ``cloudpickle``).
 
 The joblib launcher hands every job the whole context of the sweep — Hydra's context (config loader
 and callbacks), the master config, the task function and a copy of Hydra's singletons: the main
@@ -10,14 +11,13 @@ temporary file (removed when the launch returns, whatever happens); a job carrie
 overrides and the file's path. A worker process loads the file and installs Hydra's globals the
 first time it meets that path and keeps them for the next jobs of the launch — as Hydra's basic
 launcher keeps them for every job in its one process; a worker that loky starts afresh loads the
-file again. From there a job is the
-joblib launcher's: :func:`execute_job` composes its config with ``load_sweep_config``, sets
-``hydra.job.id`` / ``num`` and calls ``run_job``. Jobs run in loky processes through
-``joblib.Parallel`` with the launcher's joblib settings, in the same order, returning the same
-:class:`~hydra.core.utils.JobReturn` values. Unlike joblib's, a worker routes SIGINT / SIGTERM
-through :mod:`swarmbox.run.interrupt`, as the command line does in a lone sweep process: Ctrl-C ends
-the runs in flight as ``interrupted`` with their files written, starts no later job, and the sweep
-closes with its summary instead of a traceback.
+file again. From there a job is what the joblib launcher makes of it: :func:`execute_job` composes
+its config with ``load_sweep_config``, sets ``hydra.job.id`` / ``num`` and calls ``run_job``. Jobs
+run in loky processes through ``joblib.Parallel`` with the launcher's joblib settings, in the same
+order, returning the same :class:`~hydra.core.utils.JobReturn` values. Unlike joblib's, a worker
+routes SIGINT / SIGTERM through :mod:`swarmbox.run.interrupt`, as the command line does in a lone
+sweep process: Ctrl-C ends the runs in flight as ``interrupted`` with their files written, starts no
+later job, and the sweep closes with its summary instead of a traceback.
 """
 
 from __future__ import annotations
@@ -29,16 +29,14 @@ import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
+import cloudpickle  # a task function defined in __main__ travels by value
 from hydra.core.hydra_config import HydraConfig
 from hydra.core.singleton import Singleton
 from hydra.core.utils import JobReturn, configure_log, filter_overrides, run_job, setup_globals
 from hydra.types import HydraContext, TaskFunction
-from hydra_plugins.hydra_joblib_launcher._core import process_joblib_cfg
-from hydra_plugins.hydra_joblib_launcher.joblib_launcher import JoblibLauncher
 from joblib import Parallel, delayed
-import cloudpickle  # what loky pickles jobs with: a task function in __main__ travels
 from omegaconf import DictConfig, open_dict
 
 from swarmbox.run import interrupt
@@ -56,6 +54,31 @@ class LaunchContext:
     config: DictConfig                    # the sweep's master config
     task_function: TaskFunction
     singleton_state: dict[str, Any]       # Singleton.get_state() at launch time
+
+
+class SetUpLauncher(Protocol):
+    """A launcher after Hydra's ``setup``, with its ``joblib.Parallel`` settings."""
+
+    config: DictConfig | None
+    task_function: TaskFunction | None
+    hydra_context: HydraContext | None
+    joblib: dict[str, Any]
+
+
+_INT_SETTINGS = ("pre_dispatch", "batch_size", "max_nbytes")   # strings in the config, numbers or not
+
+
+def parallel_settings(settings: dict[str, Any]) -> dict[str, Any]:
+    """The launcher's config as ``joblib.Parallel`` arguments: always loky processes (threads would
+    share Hydra's globals between jobs), and ``pre_dispatch`` / ``batch_size`` / ``max_nbytes`` as
+    integers when they are numbers (``"8"``), left as joblib's expressions otherwise (``"2*n_jobs"``,
+    ``"auto"``, ``"1M"``)."""
+    out = {**settings, "backend": "loky"}
+    for key in _INT_SETTINGS:
+        value = out.get(key)
+        if isinstance(value, str) and value.strip().isdigit():
+            out[key] = int(value)
+    return out
 
 
 _loaded: dict[str, LaunchContext] = {}   # in a worker: the context file met last, by path
@@ -91,7 +114,8 @@ def load_context(path: str) -> LaunchContext:
 
 
 def execute_job(idx: int, overrides: Sequence[str], context_path: str) -> JobReturn:
-    """One job, in a worker: the joblib launcher's ``execute_job`` once the context is loaded."""
+    """One job, in a worker: its config composed from the sweep's master config and its overrides,
+        numbered, run by Hydra's ``run_job`` in its own directory of the sweep."""
     context = load_context(context_path)
     sweep_config = context.hydra_context.config_loader.load_sweep_config(context.config, list(overrides))
     with open_dict(sweep_config):
@@ -103,9 +127,10 @@ def execute_job(idx: int, overrides: Sequence[str], context_path: str) -> JobRet
                    job_subdir_key="hydra.sweep.subdir")
 
 
-def launch(launcher: JoblibLauncher, job_overrides: Sequence[Sequence[str]],
+def launch(launcher: SetUpLauncher, job_overrides: Sequence[Sequence[str]],
            initial_job_idx: int) -> Sequence[JobReturn]:
-    """The joblib launcher's ``launch``, each job carrying only its index, overrides and the context file."""
+    """Every job of the batch through ``joblib.Parallel``, each carrying only its index, overrides and
+    the context file's path; their ``JobReturn`` values in job order."""
     global _launcher_pid
     _launcher_pid = os.getpid()
     setup_globals()
@@ -117,9 +142,7 @@ def launch(launcher: JoblibLauncher, job_overrides: Sequence[Sequence[str]],
     sweep_dir = Path(str(launcher.config.hydra.sweep.dir))
     sweep_dir.mkdir(parents=True, exist_ok=True)
 
-    joblib_cfg = launcher.joblib
-    joblib_cfg["backend"] = "loky"   # as the joblib launcher: the threading backend breaks Hydra
-    process_joblib_cfg(joblib_cfg)
+    joblib_cfg = parallel_settings(dict(launcher.joblib))
     settings = ",".join(f"{k}={v}" for k, v in joblib_cfg.items())
     log.info(f"SwarmBox launcher: Joblib.Parallel({settings}) is launching {len(job_overrides)} jobs")
     log.info(f"Launching jobs, sweep output dir : {sweep_dir}")

@@ -133,7 +133,7 @@ class NodeProcess:
         self.restarted = False
         # One node per recorder; never flushed mid-run, so the run-wide spill directory stays unused
         self.recorder = Recorder(run_dir)
-        self.monitor = ground_monitor(cfg, m.name) if node_id == GROUND_ID else None
+        self.monitor = ground_monitor(cfg, m.name, run_dir) if node_id == GROUND_ID else None
         log = (self.monitor.tap(self.recorder) if self.monitor else self.recorder).node(node_id)
         inbox = self.medium.register(node_id, self.clock, log.appender("messages"))
         common = dict(time=self.time, clock=self.clock, net=self.medium, inbox=inbox, log=log,
@@ -255,7 +255,7 @@ class NodeProcess:
                          json.dumps(result, indent=2, sort_keys=True))
 
 
-def ground_monitor(cfg: DictConfig, mission_name: str) -> Any:
+def ground_monitor(cfg: DictConfig, mission_name: str, run_dir: Path) -> Any:
     """The ground process's live dashboard (``run.monitor``; the launcher hands it its terminal)."""
     from swarmbox import monitor
 
@@ -263,7 +263,8 @@ def ground_monitor(cfg: DictConfig, mission_name: str) -> Any:
     if not dashboard and not cfg.run.rerun:
         return None
     title = f"SwarmBox {mission_name} seed={cfg.seed} (processes)"
-    return monitor.create(title, cfg.run.monitor_hz, dashboard=dashboard, rerun=cfg.run.rerun)
+    return monitor.create(title, cfg.run.monitor_hz, dashboard=dashboard, rerun=cfg.run.rerun,
+                          run_dir=run_dir)
 
 
 def main(argv: list[str] | None = None) -> int:

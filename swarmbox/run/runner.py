@@ -108,7 +108,8 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
     try:
         with interrupt.armed():
             try:
-                monitor = _monitor(cfg, f"SwarmBox {choices.get('algo', '?')}/{m.name} seed={cfg.seed}")
+                title = f"SwarmBox {choices.get('algo', '?')}/{m.name} seed={cfg.seed}"
+                monitor = _monitor(cfg, title, run_dir)
                 swarm = build.build_swarm(cfg, m, monitor.tap(recorder) if monitor else recorder)
             except checks.INPUT_ERRORS:   # found only while building (a fault the backend cannot express)
                 discard = True
@@ -211,13 +212,14 @@ def _close(manifest: dict[str, Any], swarm: Swarm | None, recorder: Recorder, ru
         run_json.write(manifest)
 
 
-def _monitor(cfg: DictConfig, title: str):
+def _monitor(cfg: DictConfig, title: str, run_dir: Path):
     """The live dashboard of this run, or None (see :mod:`swarmbox.monitor`)."""
     realtime = bool(getattr(build.backend_class(cfg.backend), "realtime", False))
     dashboard = live_monitor.wanted(cfg.run.monitor, realtime=realtime, multirun=record.in_sweep())
     if not dashboard and not cfg.run.rerun:
         return None
-    return live_monitor.create(title, cfg.run.monitor_hz, dashboard=dashboard, rerun=cfg.run.rerun)
+    return live_monitor.create(title, cfg.run.monitor_hz, dashboard=dashboard, rerun=cfg.run.rerun,
+                               run_dir=run_dir)
 
 
 def log_writer(cfg: DictConfig) -> str:

@@ -1,4 +1,10 @@
-"""Which jobs of a sweep to compose before launching, to catch a bad override early.
+"""The jobs of a sweep (the basic sweeper's: every combination, in order, in batches) and which of
+them to compose before launching, to catch a bad override early.
+
+:func:`sweep_jobs` makes the jobs from Hydra's parsed overrides (``hydra.core.override_parser``): the
+cartesian product of every key's values, keys in the order they first appear (``hydra.sweeper.params``
+first, the command line after, a later value of a key replacing an earlier one in place), split into
+batches of ``max_batch_size`` jobs.
 
 A job is a list of override strings (``algo=hover``, ``seed=3``, ``+experiment=rq4_delivery``,
 ``~hydra.callbacks.analyze``). Whether a config *composes* depends on the config groups it selects
@@ -11,8 +17,12 @@ twenty-seed sweep composes one of them; ``seed=1x`` is not a number and is check
 
 from __future__ import annotations
 
+import itertools
 import re
 from collections.abc import Callable, Sequence
+
+from hydra.core.override_parser.types import Override
+from hydra.errors import HydraException
 
 _NUMBER = re.compile(r"[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?")
 
@@ -54,3 +64,23 @@ def jobs_to_check(batch: Sequence[Sequence[str]], is_group: Callable[[str], bool
             signatures.add(signature)
             values.update(rest)
     return chosen
+
+
+def sweep_jobs(overrides: Sequence[Override], max_batch_size: int | None) -> list[list[list[str]]]:
+    """The batches of jobs of a sweep, each job a list of ``key=value`` strings (one per key)."""
+    values: dict[str, list[str]] = {}
+    for override in overrides:
+        key = override.get_key_element()
+        if not override.is_sweep_override():
+            values[key] = [f"{key}={override.get_value_element_as_str()}"]
+        elif override.is_discrete_sweep():
+            values[key] = [f"{key}={v}" for v in override.sweep_string_iterator()]
+        else:   # interval(a,b): for optimising sweepers, not a list of jobs
+            raise HydraException(f"the swarmbox sweeper cannot sweep {override.input_line!r}: "
+                                 "an interval has no list of values (use choices or range())")
+    jobs = [list(job) for job in itertools.product(*values.values())]
+    if max_batch_size is not None and max_batch_size <= 0:
+        raise HydraException(f"hydra.sweeper.max_batch_size={max_batch_size}: a batch needs a job at least")
+    if max_batch_size is None:
+        return [jobs]
+    return [jobs[i:i + max_batch_size] for i in range(0, len(jobs), max_batch_size)]

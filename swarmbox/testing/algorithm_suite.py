@@ -19,9 +19,12 @@ Every violation found is collected; :class:`ConformanceError` lists them all. Us
     from swarmbox.testing import check_algorithm
 
     def test_my_algorithm(tmp_path):
-        check_algorithm(["algo=my_algo", "mission=my_mission"], workdir=tmp_path)
+        check_algorithm(["algo=my_algo", "mission=my_mission"], workdir=tmp_path, config_dir="conf")
 
-``edit(cfg)`` may shrink the mission (fewer drones, shorter phases) before the runs.
+``config_dir`` is a folder of your own config groups (``conf/algo/my_algo.yaml`` ...), relative to the
+current directory or absolute; it joins the shipped groups as ``swarmbox run --config-dir DIR`` does
+(see docs/user-projects.md). ``edit(cfg)`` may shrink the mission (fewer drones, shorter phases)
+before the runs. From the shell: ``swarmbox check --config-dir conf algo=my_algo``.
 """
 
 from __future__ import annotations
@@ -58,17 +61,23 @@ class ConformanceReport:
 def check_algorithm(overrides: Sequence[str], *, workdir: Path, seed: int = 0,
                     network: dict[str, float] | None = None, expect: str = "ok",
                     edit: Callable[[DictConfig], None] | None = None,
-                    config_dir: Path | None = None) -> ConformanceReport:
-    """Fly the configured algorithm twice and check the contract; raise ConformanceError if broken."""
-    from swarmbox.testing.runs import compose, fly  # Hydra and the runner load only when used
+                    config_dir: str | Path | None = None) -> ConformanceReport:
+    """Fly the configured algorithm twice and check the contract; raise ConformanceError if broken.
+
+    ``config_dir``: your own config groups, added to the shipped ones (relative paths: to the
+    current directory); a directory that does not exist raises FileNotFoundError before any run.
+    """
+    from swarmbox.testing.runs import compose, fly, search_path_override  # Hydra loads only when used
 
     if expect not in ("ok", "any"):
         raise ValueError(f"expect must be 'ok' or 'any', got {expect!r}")
     net = {**DEFAULT_NETWORK, **(network or {})}
     args = [*overrides, f"seed={seed}", "run.progress=false", *(f"network.{k}={v}" for k, v in net.items())]
+    if config_dir is not None:   # resolved once: the two runs compose the same groups
+        args.append(search_path_override(config_dir))
     report = ConformanceReport()
     for label in ("first", "second"):
-        cfg, choices = compose(args, config_dir)
+        cfg, choices = compose(args)
         if edit is not None:
             with open_dict(cfg):
                 edit(cfg)
@@ -136,4 +145,49 @@ def _log_differences(a: Path, b: Path) -> list[str]:
     return [f"not deterministic: {d}" for d in compare_logs(a, b)]
 
 
-__all__ = ["DEFAULT_NETWORK", "ConformanceError", "ConformanceReport", "check_algorithm"]
+def check_main(argv: list[str] | None = None) -> int:
+    """``swarmbox check [--config-dir DIR] OVERRIDES...``: the suite from the shell.
+
+    Exit codes: 0 the algorithm conforms, 1 it breaks the contract (every violation printed),
+    2 bad input (a config that does not compose, a missing directory).
+    """
+    import argparse
+    import sys
+    import tempfile
+
+    p = argparse.ArgumentParser(prog="swarmbox check", description=(
+        "Fly an algorithm twice under packet loss and jitter and check the contract every algorithm "
+        "must keep (docs/user-projects.md). Example: swarmbox check --config-dir conf algo=flock"))
+    p.add_argument("overrides", nargs="+", metavar="OVERRIDE",
+                   help="Hydra overrides choosing the algorithm (algo=NAME) and, optionally, its mission")
+    p.add_argument("--config-dir", "-cd", help="your own config groups (conf/algo/NAME.yaml ...), added "
+                   "to the shipped ones; relative to the current directory")
+    p.add_argument("--seed", type=int, default=0, help="root seed of both runs (0)")
+    p.add_argument("--expect", choices=["ok", "any"], default="ok",
+                   help="ok: the mission must complete; any: an abort with a reason passes too")
+    p.add_argument("--workdir", help="keep both runs here (default: a temporary directory, removed "
+                   "when the check passes)")
+    args = p.parse_intermixed_args(argv)   # options before, between or after the overrides
+    with tempfile.TemporaryDirectory(prefix="swarmbox-check-") as tmp:
+        workdir = Path(args.workdir or tmp)
+        try:
+            report = check_algorithm(args.overrides, workdir=workdir, seed=args.seed, expect=args.expect,
+                                     config_dir=args.config_dir)
+        except ConformanceError as exc:
+            print(f"FAIL  {exc}", file=sys.stderr)
+            return 1
+        except Exception as exc:   # noqa: BLE001 - composition and input errors: one line, exit 2
+            print(f"error: {type(exc).__name__}: {_first_line(exc)}", file=sys.stderr)
+            return 2
+    name = report.manifests[0].get("choices", {}).get("algo", "?")
+    print(f"PASS  algorithm '{name}': 2 runs {[m['status'] for m in report.manifests]}, identical logs"
+          + (f"; runs in {workdir}" if args.workdir else ""))
+    return 0
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip() or repr(exc)
+    return text.splitlines()[0]
+
+
+__all__ = ["DEFAULT_NETWORK", "ConformanceError", "ConformanceReport", "check_algorithm", "check_main"]

@@ -18,12 +18,24 @@ from swarmbox.run.runner import execute, run_choices
 PACKAGED_CONF = Path(__file__).resolve().parents[1] / "conf"
 
 
-def compose(overrides: Sequence[str], config_dir: Path | None = None) -> tuple[DictConfig, dict[str, str]]:
-    """The config ``python -m swarmbox.run OVERRIDES`` would run, and its group choices."""
+def search_path_override(config_dir: str | Path) -> str:
+    """``hydra.searchpath`` adding ``config_dir`` (relative: to the current directory) beside the
+    shipped groups, as ``swarmbox run --config-dir DIR`` does; a missing directory raises."""
+    path = Path(config_dir).expanduser().resolve()
+    if not path.is_dir():
+        raise FileNotFoundError(f"config_dir {str(config_dir)!r}: no such directory ({path})")
+    quoted = str(path).replace("\\", "\\\\").replace("'", "\\'")
+    return f"hydra.searchpath=['file://{quoted}']"
+
+
+def compose(overrides: Sequence[str],
+            config_dir: str | Path | None = None) -> tuple[DictConfig, dict[str, str]]:
+    """The config ``python -m swarmbox.run [--config-dir DIR] OVERRIDES`` would run, and its group choices."""
     register()
+    extra = [search_path_override(config_dir)] if config_dir is not None else []
     GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=str(config_dir or PACKAGED_CONF), version_base="1.3"):
-        cfg = hydra_compose("config", overrides=list(overrides), return_hydra_config=True)
+    with initialize_config_dir(config_dir=str(PACKAGED_CONF), version_base="1.3"):
+        cfg = hydra_compose("config", overrides=[*overrides, *extra], return_hydra_config=True)
     choices = run_choices(cfg, OmegaConf.to_container(cfg.hydra.runtime.choices))
     with open_dict(cfg):
         del cfg["hydra"]

@@ -11,12 +11,16 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-import rerun.chunk as rrc
-from mcap.reader import make_reader
-from mcap_protobuf.decoder import DecoderFactory
 
 from swarmbox.analysis.export import export_main
 from tests.conftest import ROOT, run_config
+
+# The replay extra (Rerun, MCAP): not in the test extra; CI runs these in its '.[test,replay]' venv.
+rrc = pytest.importorskip("rerun.chunk", reason="needs the replay extra: pip install -e '.[test,replay]'")
+make_reader = pytest.importorskip("mcap.reader").make_reader
+DecoderFactory = pytest.importorskip("mcap_protobuf.decoder").DecoderFactory
+pytest.importorskip("foxglove_schemas_protobuf")
+pytestmark = pytest.mark.replay
 
 NS = 1_000_000_000
 

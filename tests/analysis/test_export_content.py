@@ -15,14 +15,17 @@ from collections import defaultdict
 import numpy as np
 import pandas as pd
 import pytest
-import rerun.chunk as rrc
-from mcap.reader import make_reader
-from mcap_protobuf.decoder import DecoderFactory
 
 from swarmbox.analysis.export import export_main
 from tests.conftest import run_config
 
-pytestmark = pytest.mark.slow   # one simulated run and both exports: about 10 s
+# The replay extra (Rerun, MCAP): not in the test extra; CI runs these in its '.[test,replay]' venv.
+rrc = pytest.importorskip("rerun.chunk", reason="needs the replay extra: pip install -e '.[test,replay]'")
+make_reader = pytest.importorskip("mcap.reader").make_reader
+DecoderFactory = pytest.importorskip("mcap_protobuf.decoder").DecoderFactory
+pytest.importorskip("foxglove_schemas_protobuf")
+
+pytestmark = [pytest.mark.slow, pytest.mark.replay]   # one simulated run and both exports: about 10 s
 
 CUT_S = 14.0
 YELLOW, GREY = (1.0, 1.0, 0.0), (0.5, 0.5, 0.5)

@@ -7,6 +7,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -132,6 +133,12 @@ def test_port_plans():
 
 
 # ---- one vehicle process, spoken to over UDP ------------------------------------------------------
+#: How long a test waits for what the vehicle must send. The checks wait for the vehicle's own
+#: progress (its first packet, an ack, its next heartbeat), never for a fixed wall-clock window, so a
+#: loaded machine only makes them slower; this bound only ends a test whose vehicle is stuck.
+WAIT_S = 60.0
+
+
 class Gcs:
     """A minimal ground station on a free port of 127.0.0.1."""
 
@@ -144,23 +151,53 @@ class Gcs:
         self.enc = mc.GcsEncoder()
         self.dec = mc.Decoder(set(mc.DECODERS))
 
+    def receive(self) -> list[tuple[mc.Packet, object]]:
+        """What one datagram brought (nothing after 50 ms without one)."""
+        try:
+            data, self.peer = self.sock.recvfrom(65536)
+        except TimeoutError:
+            return []
+        return list(self.dec.decode(data))
+
     def collect(self, seconds: float) -> list[tuple[mc.Packet, object]]:
         out, end = [], time.monotonic() + seconds
         while time.monotonic() < end:
-            try:
-                data, self.peer = self.sock.recvfrom(65536)
-            except TimeoutError:
-                continue
-            out.extend(self.dec.decode(data))
+            out.extend(self.receive())
         return out
+
+    def until(self, done: Callable[[list], bool], what: str) -> list[tuple[mc.Packet, object]]:
+        """Everything received until ``done(everything so far)`` holds; fails after WAIT_S."""
+        out: list[tuple[mc.Packet, object]] = []
+        end = time.monotonic() + WAIT_S
+        while not done(out):
+            assert time.monotonic() < end, f"no {what} within {WAIT_S:.0f} s"
+            out.extend(self.receive())
+        return out
+
+    def heartbeats(self, n: int = 1) -> list[mc.HeartbeatMsg]:
+        """The next ``n`` heartbeats (sent once a second of the vehicle's own time)."""
+        got = self.until(lambda out: len(of_type(out, mc.HeartbeatMsg)) >= n, f"{n} heartbeat(s)")
+        return of_type(got, mc.HeartbeatMsg)
+
+    def ready_to_arm(self) -> list[tuple[mc.Packet, object]]:
+        """Everything up to the first SYS_STATUS that says the vehicle is ready to arm."""
+        return self.until(lambda out: any(v.ready_to_arm for v in of_type(out, mc.SysStatusMsg)),
+                          "ready to arm")
 
     def send(self, data: bytes) -> None:
         assert self.peer is not None
         self.sock.sendto(data, self.peer)
 
     def command(self, target: int, command: int, *params: float) -> list[mc.CommandAckMsg]:
+        """Sends a command; returns every ack received up to the first one for this command."""
         self.send(self.enc.command((target, 1), command, params))
-        return [v for _, v in self.collect(0.3) if isinstance(v, mc.CommandAckMsg)]
+        got = self.until(lambda out: any(a.command == command for a in of_type(out, mc.CommandAckMsg)),
+                         f"ack of command {command}")
+        return of_type(got, mc.CommandAckMsg)
+
+
+def of_type(packets: list[tuple[mc.Packet, object]], kind: type) -> list:
+    return [v for _, v in packets if isinstance(v, kind)]
 
 
 @pytest.fixture
@@ -182,36 +219,36 @@ def vehicle():
 @pytest.mark.slow
 def test_vehicle_speaks_px4(vehicle):
     gcs = vehicle
-    first = gcs.collect(2.0 * 4 / VEHICLE_SPEED)      # 2 s at speed 4: the same simulated time
-    assert first, "no traffic from mavsim"
+    first = gcs.ready_to_arm()     # the estimator is ready one second (vehicle time) after start
     assert {p.system_id for p, _ in first} == {3} and {p.component_id for p, _ in first} == {1}
-    hb = [v for _, v in first if isinstance(v, mc.HeartbeatMsg)]
-    assert hb and hb[-1].autopilot and hb[-1].custom_mode == mc.MODE_HOLD and not hb[-1].armed
-    assert any(v.ready_to_arm for _, v in first if isinstance(v, mc.SysStatusMsg))
+    hb = gcs.heartbeats()
+    assert hb[-1].autopilot and hb[-1].custom_mode == mc.MODE_HOLD and not hb[-1].armed
     frame = GeoFrame(47.397742, 8.545594, 488.0)
-    glob = [v for _, v in first if isinstance(v, mc.GlobalPositionMsg)][-1]
+    glob = of_type(first, mc.GlobalPositionMsg)[-1]
     assert frame.ned_of(glob.lat_deg, glob.lon_deg, glob.alt_m) == pytest.approx((10.0, -5.0, 0.0), abs=0.3)
     assert {p.msg_id for p, _ in first} >= {mc.MSG["LOCAL_POSITION_NED"], mc.MSG["EXTENDED_SYS_STATE"]}
 
-    # message intervals are honoured (rates in simulation time: 5 Hz x speed x 1.5 s wall)
+    # message intervals are honoured, in the vehicle's own time (its time_boot stamps), at any pace
     att, lpn = mc.MSG["ATTITUDE"], mc.MSG["LOCAL_POSITION_NED"]
     acks = gcs.command(3, mc.CMD_SET_MESSAGE_INTERVAL, att, -1)
     acks += gcs.command(3, mc.CMD_SET_MESSAGE_INTERVAL, lpn, 1e6 / 5)
     assert [a.result for a in acks] == [mc.RESULT_ACCEPTED] * 2 and {a.target_system for a in acks} == {255}
-    gcs.dec.skipped_ids.clear()
-    window = gcs.collect(1.5)
-    counts = {m: sum(1 for p, _ in window if p.msg_id == m) for m in (att, lpn)}
-    expected = 5 * VEHICLE_SPEED * 1.5
-    assert counts[att] == 0 and 0.7 * expected <= counts[lpn] <= 1.3 * expected, counts
+    gcs.dec.skipped_ids.clear()   # ATTITUDE is not decoded here: counted among the skipped ids
+    got = gcs.until(lambda out: len(of_type(out, mc.LocalPositionMsg)) >= 12, "LOCAL_POSITION_NED")
+    stamps = [v.time_boot_s for v in of_type(got, mc.LocalPositionMsg)]
+    assert 10 / (stamps[11] - stamps[1]) == pytest.approx(5.0, rel=0.05)   # the first: old schedule
+    assert gcs.dec.skipped_ids.get(att, 0) == 0
     assert gcs.command(3, mc.CMD_SET_MESSAGE_INTERVAL, 9999, -1)[0].result == mc.RESULT_UNSUPPORTED
 
     # refusals are NACKs; commands for another system get no answer; garbage is survived
     assert gcs.command(3, mc.CMD_SET_MODE, 1, 6, 0)[0].result == mc.RESULT_TEMPORARILY_REJECTED
     assert gcs.command(3, mc.CMD_TAKEOFF, *(math.nan,) * 6, 500.0)[0].result == mc.RESULT_DENIED
-    assert gcs.command(9, mc.CMD_ARM_DISARM, 1.0) == []
+    gcs.send(gcs.enc.command((9, 1), mc.CMD_ARM_DISARM, (1.0,)))
     gcs.send(b"\xfd\x09garbage" + bytes(range(40)))
-    assert gcs.command(0, mc.CMD_ARM_DISARM, 1.0)[0].result == mc.RESULT_ACCEPTED    # 0: broadcast
-    assert any(v.armed for _, v in gcs.collect(1.0) if isinstance(v, mc.HeartbeatMsg))
+    # the vehicle reads in order: acks up to the next command's show whether system 9's was answered
+    acks = gcs.command(0, mc.CMD_ARM_DISARM, 1.0)                                       # 0: broadcast
+    assert [a.result for a in acks] == [mc.RESULT_ACCEPTED]
+    assert gcs.heartbeats()[-1].armed
 
 
 def test_sim_params_on_the_command_line_keep_their_types():

@@ -380,7 +380,8 @@ def test_bad_param_value_raises():
 def test_yaml_lists_every_param_with_its_default():
     conf = yaml.safe_load(CONF.read_text())
     assert conf.pop("name") == "sim" and conf.pop("_target_") == "swarmbox.hal.sim.backend.SimBackend"
-    assert conf.pop("defaults") == ["sim_schema", "_self_"]   # typed keys: swarmbox/run/backend_schema.py
+    # typed keys: swarmbox/run/backend_schema.py, stored outside the backend group
+    assert conf.pop("defaults") == ["/backend_sim_schema@_here_", "_self_"]
     assert list(conf) == [f.name for f in fields(SimParams)]
     assert SimParams(**conf) == SimParams()
     make(**conf)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from swarmbox.monitor import wanted
+from swarmbox.monitor import rerun_target, wanted
 from tests.conftest import table
 
 CROSSING = ("algo=crossing", "mission=crossing", "run.proximity_m=10")
@@ -42,12 +42,26 @@ def test_monitor_leaves_the_logs_unchanged(run):
         assert a.equals(b), (node, name)
 
 
-def test_live_stream_to_a_rerun_recording(run, tmp_path):
-    import rerun.chunk as rrc
+def test_a_relative_rerun_path_is_inside_the_run_directory(tmp_path):
+    run_dir = tmp_path / "runs" / "r1"
+    assert rerun_target("live.rrd", run_dir) == str(run_dir / "live.rrd")
+    assert rerun_target("rec/live.rrd", run_dir) == str(run_dir / "rec" / "live.rrd")
+    assert rerun_target(str(tmp_path / "x.rrd"), run_dir) == str(tmp_path / "x.rrd")
+    url = "rerun+http://127.0.0.1:9876/proxy"
+    assert rerun_target(url, run_dir) == url
 
-    target = tmp_path / "live.rrd"
-    manifest, _ = run(*CROSSING, "run.monitor=off", f"run.rerun={target}", "run.monitor_hz=40")
+
+@pytest.mark.replay
+def test_live_stream_to_a_rerun_recording(run, tmp_path, monkeypatch):
+    rrc = pytest.importorskip("rerun.chunk", reason="needs the replay extra (Rerun)")
+
+    cwd = tmp_path / "cwd"
+    cwd.mkdir()
+    monkeypatch.chdir(cwd)
+    manifest, run_dir = run(*CROSSING, "run.monitor=off", "run.rerun=live/stream.rrd", "run.monitor_hz=40")
     assert manifest["status"] == "ok", manifest["reason"]
+    target = run_dir / "live" / "stream.rrd"    # a relative path lands in the run dir, not the cwd
+    assert target.is_file() and list(cwd.iterdir()) == []
     assert manifest["monitor"]["rerun_frames"] >= 1
     entities, texts = set(), []
     for chunk in rrc.RrdReader(target).store().stream():
@@ -61,6 +75,7 @@ def test_live_stream_to_a_rerun_recording(run, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.replay
 def test_live_stream_to_a_rerun_server_over_grpc(run, tmp_path):
     """The same stream to a real Rerun server on 127.0.0.1, which saves what it receives."""
     import signal
@@ -70,7 +85,7 @@ def test_live_stream_to_a_rerun_server_over_grpc(run, tmp_path):
     import time
     import warnings
 
-    import rerun.chunk as rrc
+    rrc = pytest.importorskip("rerun.chunk", reason="needs the replay extra (Rerun)")
 
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -76,10 +76,20 @@ class HangingDrone(DroneAlgorithm):
 
 
 class SlowDrone(DroneAlgorithm):
-    """Every exec_loop call takes ``params.delay_s`` of wall time (a long run to interrupt)."""
+    """Every exec_loop call takes ``params.delay_s`` of wall time (a long run to interrupt). With
+    ``params.started_dir``, drone 0's first exec_loop call leaves a new file there: a test waits for
+    the run's progress, not for a guessed number of seconds."""
+
+    started = False
 
     def exec_loop(self, ctx):
         import time
+        import uuid
+        from pathlib import Path
+
+        if not self.started and ctx.id == 0 and ctx.params.get("started_dir"):
+            self.started = True
+            (Path(ctx.params["started_dir"]) / uuid.uuid4().hex).touch()
         time.sleep(ctx.params.get("delay_s", 0.002))
         n, e, _ = ctx.home_ned_m
         return Setpoint.position(n, e, -2.0)

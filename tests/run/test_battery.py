@@ -19,7 +19,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from tests.conftest import ROOT
+from tests import realtime
+from tests.conftest import ROOT, sweep_job
 
 HOVER = ("algo=hover", "mission=hover", "algo.params.hover_s=1", "run.progress=false")
 SAME_POINT = "{0:[0,0],1:[0,0],2:[10,0],3:[15,0]}"
@@ -168,16 +169,25 @@ def test_wild_setpoints_are_refused_or_clamped_and_recorded(tmp_path, bad, event
         assert last["landed"] and not last["armed"]
 
 
+def wait_for_files(where: Path, n: int, proc: subprocess.Popen, timeout_s: float = 300.0) -> None:
+    """Until ``n`` runs have flown their first EXECUTION tick (SlowDrone's ``started_dir``): a loaded
+    machine takes longer to get there, so the test waits for it, not for a fixed time."""
+    deadline = time.monotonic() + timeout_s
+    while len(list(where.iterdir())) < n:
+        assert proc.poll() is None, "the run ended before it was interrupted"
+        assert time.monotonic() < deadline, f"fewer than {n} runs started within {timeout_s:.0f} s"
+        time.sleep(0.02)
+
+
 def test_sigterm_marks_a_single_run_interrupted_with_the_time_reached(tmp_path):
-    out = tmp_path / "run"
+    out, started = tmp_path / "run", tmp_path / "started"
+    started.mkdir()
     cmd = [sys.executable, "-m", "swarmbox.run", "algo=hover", "mission=hover", "run.progress=false",
            "algo.drone._target_=tests.run.algos.SlowDrone", "+algo.params.delay_s=0.002",
-           "algo.params.hover_s=60", "mission.max_sim_time_s=100",
+           f"+algo.params.started_dir={started}", "algo.params.hover_s=60", "mission.max_sim_time_s=100",
            f"run.out_dir={out}", f"hydra.run.dir={tmp_path / 'hydra'}"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    while not (out / "config.yaml").exists() and proc.poll() is None:
-        time.sleep(0.05)
-    time.sleep(1.0)
+    wait_for_files(started, 1, proc)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 128 + signal.SIGTERM, err
@@ -189,31 +199,27 @@ def test_sigterm_marks_a_single_run_interrupted_with_the_time_reached(tmp_path):
 
 
 def test_sigint_mid_sweep_finishes_the_run_writes_the_summary_and_exits_130(tmp_path):
-    sweep = tmp_path / "sweep"
+    sweep, started = tmp_path / "sweep", tmp_path / "started"
+    started.mkdir()
     cmd = [sys.executable, "-m", "swarmbox.run", "-m", *HOVER, "seed=range(6)",
            "algo.drone._target_=tests.run.algos.SlowDrone", "+algo.params.delay_s=0.002",
-           f"hydra.sweep.dir={sweep}"]
+           f"+algo.params.started_dir={started}", f"hydra.sweep.dir={sweep}"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    ok = 0
-    for line in proc.stdout:
-        ok += line.startswith("OK")
-        if ok == 2:
-            while not (sweep / "2" / "config.yaml").exists():
-                time.sleep(0.02)
-            time.sleep(0.3)
-            proc.send_signal(signal.SIGINT)
-            break
+    wait_for_files(started, 3, proc)   # runs 0 and 1 done, run 2 flying
+    proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
-    statuses = {d.name: _run_json(d)["status"] for d in sweep.iterdir() if (d / "run.json").exists()}
-    assert statuses == {"0": "ok", "1": "ok", "2": "interrupted"}
-    interrupted = _run_json(sweep / "2")
+    runs = [_run_json(d) for d in sweep.iterdir() if (d / "run.json").exists()]
+    statuses = {m["seed"]: m["status"] for m in runs}
+    assert statuses == {0: "ok", 1: "ok", 2: "interrupted"}
+    interrupted = _run_json(sweep_job(sweep, 2))
     assert interrupted["sim_time_s"] > 0 and "SIGINT" in interrupted["reason"]
     summary = json.loads((sweep / "sweep.json").read_text())
     assert summary["counts"] == {"ok": 2, "interrupted": 1} and len(summary["not_started"]) == 3
     assert summary["interrupted_by"] == "SIGINT"
     assert "3 not started" in out and not list(sweep.rglob("*.partial"))
-    assert sorted(p.name for p in sweep.iterdir()) == ["0", "1", "2", "multirun.yaml", "sweep.json"]
+    assert sorted(p.name for p in sweep.iterdir()) == sorted(
+        [*(sweep_job(sweep, s).name for s in range(3)), "multirun.yaml", "sweep.json"])
 
 
 def test_no_vehicle_at_the_configured_port_fails_naming_it(tmp_path):
@@ -232,8 +238,11 @@ def test_no_vehicle_at_the_configured_port_fails_naming_it(tmp_path):
 
 def test_vehicle_link_lost_ends_the_run_when_the_others_are_down_naming_the_drone(run):
     """Case 19 on the runner side: a vehicle falls silent mid-mission (its mavsim process is killed)."""
-    manifest, d = run("algo=hover", "mission=hover", "algo.params.hover_s=6", "run.speed=4", "backend=mavsim",
-                      "backend.link_timeout_s=1", "mission.max_sim_time_s=200",
+    # the pace the machine allows now, and a link timeout (run time) a vehicle process kept off a
+    # loaded CPU for a while cannot reach: only the killed vehicle's link is lost
+    manifest, d = run("algo=hover", "mission=hover", "algo.params.hover_s=6", "backend=mavsim",
+                      f"run.speed={realtime.speed(4.0)}", "backend.link_timeout_s=6",
+                      "mission.max_sim_time_s=200",
                       prepare=lambda s: s.schedule(5.0, lambda sw: sw.backend.processes[1].kill()))
     assert "drone 1 link lost" in manifest["reason"], manifest["reason"]
     assert "max_sim_time_s" not in manifest["reason"]

@@ -22,11 +22,11 @@ from hydra.core.singleton import Singleton
 from hydra.test_utils.launcher_common_tests import BatchedSweeperTestSuite, LauncherTestSuite
 from hydra.types import HydraContext
 from hydra.version import VersionBase
-from hydra_plugins.hydra_joblib_launcher.joblib_launcher import JoblibLauncher
 from omegaconf import OmegaConf
 from omegaconf.basecontainer import BaseContainer
 from packaging.version import Version
 
+from hydra_plugins.swarmbox_launcher.launcher import SwarmBoxLauncher
 from swarmbox.run import launcher
 from swarmbox.run.launcher import CONTEXT_PREFIX, LaunchContext, load_context, write_context
 from tests.conftest import ROOT
@@ -41,7 +41,8 @@ def command(tmp_path: Path, name: str, *args: str) -> tuple[list[str], dict[str,
     tmp = tmp_path / f"tmp-{name}"
     tmp.mkdir()
     cmd = [sys.executable, "-m", "swarmbox.run", "-m", f"hydra/launcher={name}", "hydra.launcher.n_jobs=2",
-           *HOVER, *args, f"hydra.sweep.dir={tmp_path / name}", "~hydra.callbacks.analyze"]
+           *HOVER, *args, f"hydra.sweep.dir={tmp_path / name}", "~hydra.callbacks.analyze",
+           "hydra.sweep.subdir=${hydra.job.num}"]   # job dirs by number: these tests compare job order
     return cmd, {**os.environ, "TMPDIR": str(tmp)}
 
 
@@ -202,7 +203,7 @@ def test_a_worker_reads_the_context_file_once_and_only_the_current_one(tmp_path,
 
 def test_the_context_file_is_removed_when_the_launch_fails(tmp_path, monkeypatch, hydra_globals):
     monkeypatch.setattr("tempfile.tempdir", str(tmp_path))
-    failing = JoblibLauncher(n_jobs=0)                      # Parallel refuses it once the file exists
+    failing = SwarmBoxLauncher(n_jobs=0)                     # Parallel refuses it once the file exists
     config = OmegaConf.create({"hydra": {"hydra_logging": {"version": 1, "root": None}, "verbose": False,
                                          "sweep": {"dir": str(tmp_path / "sweep")}}})
     failing.setup(hydra_context=HydraContext(config_loader=None, callbacks=None), task_function=task,
@@ -210,3 +211,13 @@ def test_the_context_file_is_removed_when_the_launch_fails(tmp_path, monkeypatch
     with pytest.raises(ValueError, match="n_jobs"):
         launcher.launch(failing, [["seed=0"]], initial_job_idx=0)
     assert not list(tmp_path.glob(f"{CONTEXT_PREFIX}*"))
+
+
+def test_the_config_becomes_parallel_arguments_with_numbers_as_numbers_and_loky_always():
+    settings = {"n_jobs": 2, "backend": "threading", "pre_dispatch": "8", "batch_size": "auto",
+                "max_nbytes": "1M", "timeout": None}
+    assert launcher.parallel_settings(settings) == {"n_jobs": 2, "backend": "loky", "pre_dispatch": 8,
+                                           "batch_size": "auto", "max_nbytes": "1M", "timeout": None}
+    assert settings["backend"] == "threading"              # the launcher's own config is left alone
+    assert launcher.parallel_settings({"pre_dispatch": "2*n_jobs", "batch_size": "4"}) == {
+        "pre_dispatch": "2*n_jobs", "batch_size": 4, "backend": "loky"}

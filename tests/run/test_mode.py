@@ -1,4 +1,4 @@
-"""Run or sweep from the command line: Hydra does not compose the config an extra time to find out."""
+"""Run or sweep from the command line: ``-m`` or a ``hydra.mode=MULTIRUN`` override starts a sweep."""
 
 from __future__ import annotations
 
@@ -6,34 +6,7 @@ import json
 import subprocess
 import sys
 
-import pytest
-from hydra._internal.hydra import Hydra
-from hydra.types import RunMode
-
-from swarmbox.run import mode
 from tests.conftest import ROOT
-
-
-@pytest.mark.parametrize("overrides, expected", [
-    ([], None),
-    (["seed=1", "algo=hover"], None),
-    (["hydra.mode=MULTIRUN", "seed=0,1"], RunMode.MULTIRUN),
-    (["hydra.mode=run"], RunMode.RUN),
-    (["hydra.mode=RUN", "hydra.mode=MULTIRUN"], RunMode.MULTIRUN),
-    (["hydra.mode=sideways"], None),   # Hydra refuses the override itself, naming it
-])
-def test_the_mode_comes_from_the_overrides(overrides, expected):
-    assert mode.mode_from_overrides(overrides) is expected
-
-
-def test_hydra_no_longer_composes_to_find_the_mode(monkeypatch):
-    def refuse(*args, **kwargs):
-        raise AssertionError("composed")
-
-    monkeypatch.setattr(Hydra, "compose_config", refuse)
-    monkeypatch.setattr(Hydra, "get_mode", Hydra.get_mode)   # undone after the test
-    mode.install()
-    assert Hydra.get_mode(object.__new__(Hydra), "config", ["hydra.mode=MULTIRUN"]) is RunMode.MULTIRUN
 
 
 def test_a_mode_override_still_starts_a_sweep_without_dash_m(tmp_path):

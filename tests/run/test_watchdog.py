@@ -45,7 +45,8 @@ def test_a_hook_past_the_limit_is_stopped_and_named(dog):
     start = time.monotonic()
     with pytest.raises(HookTimeout, match=r"^drone 2: exec_loop/exec_complete did not return within 0\.3 s"):
         algo.run_stage(Stage.EXECUTION, None)
-    assert 0.3 <= time.monotonic() - start < 2.0
+    # stopped after the limit, long before the hook's own 30 s end (any margin for a loaded machine)
+    assert 0.3 <= time.monotonic() - start < 20.0
 
 
 @pytest.mark.parametrize("call, named", [

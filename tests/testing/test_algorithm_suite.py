@@ -50,3 +50,27 @@ def test_the_worked_example_of_the_docs_conforms(tmp_path):
                               "+algo.ground._target_=tests.testing.shuttle.ShuttleGround",
                               "~algo.params.hover_s", "+algo.params.spacing_m=6"], workdir=tmp_path)
     assert [m["status"] for m in report.manifests] == ["ok", "ok"]
+
+
+def _user_conf(root):
+    """A user's own group entry: algo=mine, the shipped hover algorithm under another name."""
+    (root / "conf" / "algo").mkdir(parents=True)
+    (root / "conf" / "algo" / "mine.yaml").write_text(
+        "defaults:\n  - hover\n  - _self_\nname: mine\nparams: {hover_s: 1}\n")
+
+
+@pytest.mark.parametrize("relative", [True, False])
+def test_a_user_config_dir_joins_the_shipped_groups(tmp_path, monkeypatch, relative):
+    _user_conf(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    config_dir = "conf" if relative else tmp_path / "conf"
+    report = check_algorithm(["algo=mine", "mission=hover"], workdir=tmp_path / "runs", config_dir=config_dir)
+    assert [(m["status"], m["choices"]["algo"], m["choices"]["mission"]) for m in report.manifests] == \
+        [("ok", "mine", "hover")] * 2
+
+
+def test_a_missing_config_dir_is_named_before_any_run(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(FileNotFoundError, match="config_dir 'nope': no such directory"):
+        check_algorithm(["algo=hover"], workdir=tmp_path / "runs", config_dir="nope")
+    assert not (tmp_path / "runs").exists()

@@ -18,6 +18,7 @@ it freezes when a link falls silent.
 
 from __future__ import annotations
 
+import errno
 import logging
 import math
 import sys
@@ -29,9 +30,9 @@ from typing import Any, Protocol
 import numpy as np
 
 from swarmbox.hal.mavlink.frames import GeoFrame, VehicleFrame
-from swarmbox.hal.mavlink.link import VehicleLink
+from swarmbox.hal.mavlink.link import VehicleLink, parse_connection
 from swarmbox.hal.px4.params import BootClock, Px4Params, boot_clock_fit
-from swarmbox.hal.px4.sitl import SitlLauncher, resolve_build
+from swarmbox.hal.px4.sitl import ENV_BUILD, SHARED_BUILDS, SitlLauncher, resolve_build
 from swarmbox.hal.px4.vehicle import WANTED, Px4Vehicle
 from swarmbox.hal.safety import SafetyLimits
 from swarmbox.hal.vehicle import VehicleEvent
@@ -109,10 +110,27 @@ class Px4Backend:
         return self._clock_s - self.t0_s
 
     def _make_launcher(self, homes: list[Vec3]) -> Launcher | None:
-        p = self.params
-        if (p.connections and str(p.px4_build).lower() == "auto") or resolve_build(p.px4_build) is None:
-            return None   # listed connections: vehicles that already run
-        return SitlLauncher(self.params, homes, self.frame, self.run_dir)
+        """The SITL launcher, or None (vehicles that already run); says at once which it is."""
+        p, n = self.params, len(homes)
+        auto = str(p.px4_build).strip().lower() == "auto"
+        if p.connections and auto:   # listed connections: vehicles that already run
+            _say(f"px4 backend: connecting to {n} running vehicle(s) at {', '.join(p.connections)} "
+                 f"(backend.connections; no PX4 launched), waiting up to {p.connect_timeout_s:g} s")
+            return None
+        if resolve_build(p.px4_build) is None:
+            specs = [f"udpin:127.0.0.1:{14540 + i}" for i in range(n)]
+            why = (f"no PX4 build found (px4_build=auto: ${ENV_BUILD} is unset and "
+                   f"{' and '.join(str(b) for b in SHARED_BUILDS)} hold none)" if auto
+                   else "px4_build=null: no PX4 launched")
+            _say(f"px4 backend: {why}; waiting up to {p.connect_timeout_s:g} s for {n} vehicle(s) already "
+                 f"running, on UDP ports {_ports(specs)} "
+                 "(backend.px4_build=<PX4-Autopilot tree> launches SITL)")
+            return None
+        launcher = SitlLauncher(self.params, homes, self.frame, self.run_dir)
+        first = launcher.instance(0)
+        _say(f"px4 backend: launching {n} PX4 SITL instance(s) {first}-{first + n - 1} from {launcher.build} "
+             f"(UDP ports {_ports(launcher.connections())}; backend.sitl.first_instance={first})")
+        return launcher
 
     def _open(self, homes: list[Vec3]) -> None:
         p, n = self.params, len(homes)
@@ -124,8 +142,13 @@ class Px4Backend:
             raise ValueError(f"px4 backend: {n} vehicles but {len(specs)} connections and "
                              f"{len(sysids)} system ids")
         wanted, key = set(WANTED), p.signing_bytes()
-        for spec, sysid in zip(specs, sysids, strict=True):
-            self._links.append(VehicleLink(spec, sysid, wanted, signing_key=key))
+        for i, (spec, sysid) in enumerate(zip(specs, sysids, strict=True)):
+            try:
+                self._links.append(VehicleLink(spec, sysid, wanted, signing_key=key))
+            except OSError as exc:
+                if exc.errno != errno.EADDRINUSE:
+                    raise
+                raise OSError(self._busy_port(i, spec)) from None
         if self.launcher is not None:
             self.launcher.start([link.endpoint.local_port for link in self._links])
         cfg = p.link_config(self._gnss_failure())
@@ -135,6 +158,17 @@ class Px4Backend:
                        p.connect_timeout_s)
         if p.wait_ready or self.launcher is not None:
             self._wait_for("ready to arm", lambda v: v.telemetry().ready_to_arm, p.ready_timeout_s)
+
+    def _busy_port(self, i: int, spec: str) -> str:
+        """One line for a port another program holds: which vehicle, and the key that moves it."""
+        port = _ports([spec])
+        if not isinstance(self.launcher, SitlLauncher):
+            return (f"px4 backend: UDP port {port} of vehicle {i} ({spec}) is in use by another program; "
+                    "list the vehicles' own connections with backend.connections=[...]")
+        first = self.launcher.options.first_instance
+        return (f"px4 backend: UDP port {port} of vehicle {i} (PX4 instance {first + i}) is in use, by "
+                "another run or PX4 on this machine; give this run a free instance range with "
+                f"backend.sitl.first_instance=N (now {first}; vehicle i is instance N+i)")
 
     def _gnss_failure(self) -> str:
         """``auto``: PX4 SIH (up to Aug 2025) answers no GNSS failure injection; write SIM_GPS_USED there."""
@@ -252,6 +286,19 @@ def _why_silent(links: list[VehicleLink], missing: list[Px4Vehicle]) -> str:
         if not (st.foreign or link.decoder.signature_rejected) and st.rx_datagrams == 0:
             notes.append(f"drone {v.drone_id}: nothing received on port {link.endpoint.local_port}")
     return "; " + "; ".join(notes) if notes else ""
+
+
+def _say(line: str) -> None:
+    """A start-up line on stderr, at once: what the backend does before it waits for vehicles."""
+    print(line, file=sys.stderr, flush=True)
+
+
+def _ports(specs: Sequence[str]) -> str:
+    """The local UDP ports of connection strings, as ``14540-14543`` or ``14540, 24550``."""
+    ports = [parse_connection(s)[1][1] for s in specs]
+    if len(ports) > 1 and ports == list(range(ports[0], ports[0] + len(ports))):
+        return f"{ports[0]}-{ports[-1]}"
+    return ", ".join(map(str, ports))
 
 
 def _run_dir(configured: str | None) -> Path | None:

@@ -1,4 +1,21 @@
-"""The setpoint safety monitor every bridge runs before a setpoint reaches an autopilot."""
+"""The setpoint safety monitor every bridge runs before a setpoint reaches an autopilot.
+
+It keeps every setpoint kind inside one envelope: the geofence (a horizontal radius around the
+mission origin), the ceiling (``d >= -max_alt_m``) and the floor (``d <= floor_d_m``, the ground).
+
+- **Position** setpoints are moved onto the boundary: the horizontal target is scaled back onto the
+  fence, the altitude clamped to the ceiling and the floor.
+- **Velocity and acceleration** setpoints are judged against the vehicle's state (its estimated
+  position and velocity): the component pointing out of the envelope is limited so the vehicle can
+  still react (``response_s``) and brake at ``brake_m_s2`` before the boundary; at or
+  past the boundary nothing outward is left and a vehicle outside is sent back in (at most
+  ``return_m_s``). The tangential part is untouched: a swarm flying into the fence slides along it.
+  An acceleration is limited so the outward velocity follows that same braking profile.
+
+Reasons are fixed codes (``nonfinite``, ``jump``, ``speed``, ``accel``, ``geofence``, ``ceiling``,
+``floor``, joined with ``+`` in that order), never text with numbers in it: the numbers go into the
+``safety`` event's fields.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +23,12 @@ import math
 from dataclasses import dataclass
 
 from swarmbox.api import Setpoint, SetpointKind, Telemetry
+
+#: every reason code the monitor gives, in the order a combined reason lists them
+REASONS = ("nonfinite", "jump", "speed", "accel", "geofence", "ceiling", "floor")
+_POSITION, _VELOCITY = SetpointKind.POSITION, SetpointKind.VELOCITY
+RETURN_GAIN_1_S = 0.5     # a vehicle past a boundary is sent back at this gain (m/s per m) ...
+VELOCITY_GAIN_1_S = 2.0   # an acceleration steers the outward velocity to its limit at this gain
 
 
 @dataclass(frozen=True, slots=True)
@@ -15,43 +38,137 @@ class SafetyLimits:
     geofence_radius_m: float = 500.0     # horizontal distance from the mission origin
     max_alt_m: float = 120.0             # altitude ceiling (d >= -max_alt_m)
     max_jump_m: float = 1000.0           # position setpoints farther than this from the drone are refused
+    floor_d_m: float = 0.0               # the ground: position setpoints below it (d > floor) are raised
+    brake_m_s2: float = 2.0              # deceleration the fence and ceiling leave room for
+    return_m_s: float = 1.0              # ... up to this speed
+    response_s: float = 0.5              # how long the vehicle takes to follow a new velocity (s)
 
 
 @dataclass(frozen=True, slots=True)
 class Verdict:
     setpoint: Setpoint | None   # what to fly (None: refused)
     action: str                 # "ok", "clamped" or "refused"
-    reason: str = ""
+    reason: str = ""            # "+"-joined codes of REASONS
 
 
 _OK = "ok"
 
 
 def check_setpoint(sp: Setpoint, tel: Telemetry, limits: SafetyLimits) -> Verdict:
-    """Refuse non-finite or absurd setpoints; clamp speed, acceleration, geofence and ceiling."""
+    """Refuse non-finite or absurd setpoints; keep the rest inside speed, acceleration and the envelope."""
     n, e, d = sp.ned
     if not (math.isfinite(n) and math.isfinite(e) and math.isfinite(d)) or (
             sp.yaw_rad is not None and not math.isfinite(sp.yaw_rad)):
-        return Verdict(None, "refused", "non-finite setpoint")
-    if sp.kind is SetpointKind.POSITION:
-        if math.dist(sp.ned, tel.pos_ned_m) > limits.max_jump_m:
-            return Verdict(None, "refused", f"position setpoint more than {limits.max_jump_m} m away")
-        reasons = []
-        r = math.hypot(n, e)
-        if r > limits.geofence_radius_m:
-            k = limits.geofence_radius_m / r
-            n, e = n * k, e * k
-            reasons.append("geofence")
-        if d < -limits.max_alt_m:
-            d = -limits.max_alt_m
-            reasons.append("ceiling")
-        if reasons:
-            return Verdict(Setpoint(sp.kind, (n, e, d), sp.yaw_rad), "clamped", "+".join(reasons))
-        return Verdict(sp, _OK)
-    limit = limits.max_speed_m_s if sp.kind is SetpointKind.VELOCITY else limits.max_accel_m_s2
+        return Verdict(None, "refused", "nonfinite")
+    if sp.kind is _POSITION:
+        return _position(sp, tel, limits)
+    velocity = sp.kind is _VELOCITY
+    limit = limits.max_speed_m_s if velocity else limits.max_accel_m_s2
+    reasons = []
     norm = math.sqrt(n * n + e * e + d * d)
     if norm > limit:
         k = limit / norm
-        return Verdict(Setpoint(sp.kind, (n * k, e * k, d * k), sp.yaw_rad), "clamped",
-                       f"norm {norm:.2f} above {limit}")
+        n, e, d = n * k, e * k, d * k
+        reasons.append("speed" if velocity else "accel")
+    fenced = _fence(velocity, (n, e, d), tel, limits)
+    if fenced is not None:
+        (n, e, d), codes = fenced
+        reasons.extend(codes)
+        norm = math.sqrt(n * n + e * e + d * d)
+        if norm > limit:   # a braking acceleration added to a sideways one: keep the limit
+            k = limit / norm
+            n, e, d = n * k, e * k, d * k
+    if reasons:
+        return Verdict(Setpoint(sp.kind, (n, e, d), sp.yaw_rad), "clamped", "+".join(reasons))
     return Verdict(sp, _OK)
+
+
+def _position(sp: Setpoint, tel: Telemetry, limits: SafetyLimits) -> Verdict:
+    n, e, d = sp.ned
+    if math.dist(sp.ned, tel.pos_ned_m) > limits.max_jump_m:
+        return Verdict(None, "refused", "jump")
+    reasons = []
+    r = math.hypot(n, e)
+    if r > limits.geofence_radius_m:
+        k = limits.geofence_radius_m / r
+        n, e = n * k, e * k
+        reasons.append("geofence")
+    if d < -limits.max_alt_m:
+        d = -limits.max_alt_m
+        reasons.append("ceiling")
+    elif d > limits.floor_d_m:
+        d = limits.floor_d_m
+        reasons.append("floor")
+    if reasons:
+        return Verdict(Setpoint(sp.kind, (n, e, d), sp.yaw_rad), "clamped", "+".join(reasons))
+    return Verdict(sp, _OK)
+
+
+def _reach(limits: SafetyLimits) -> float:
+    """How near a boundary a velocity or acceleration can be limited: the stopping distance of the
+    fastest allowed flight plus a second of it. Farther from both, nothing is (the usual case)."""
+    return limits.max_speed_m_s * (limits.max_speed_m_s / (2.0 * limits.brake_m_s2) + limits.response_s + 1.0)
+
+
+def near_boundary(pos_ned_m: tuple[float, float, float], limits: SafetyLimits) -> bool:
+    """Whether a velocity or acceleration setpoint flown at ``pos_ned_m`` may need limiting."""
+    reach = _reach(limits)
+    return (limits.geofence_radius_m - math.hypot(pos_ned_m[0], pos_ned_m[1]) <= reach
+            or limits.max_alt_m + pos_ned_m[2] <= reach)
+
+
+def outward_limit(gap_m: float, limits: SafetyLimits) -> float:
+    """The largest speed towards a boundary ``gap_m`` ahead (negative past it: the way back)."""
+    if gap_m > 0.0:   # v * response + v^2 / 2b = gap: it reacts, then brakes, and stops in time
+        bt = limits.brake_m_s2 * limits.response_s
+        return math.sqrt(bt * bt + 2.0 * limits.brake_m_s2 * gap_m) - bt
+    return -min(RETURN_GAIN_1_S * -gap_m, limits.return_m_s)
+
+
+def _fence(velocity: bool, cmd: tuple[float, float, float], tel: Telemetry,
+           limits: SafetyLimits) -> tuple[tuple[float, float, float], list[str]] | None:
+    """``cmd`` (a velocity, or an acceleration) with its outward parts limited; None if unchanged."""
+    n, e, d = cmd
+    pn, pe, pd = tel.pos_ned_m
+    vn, ve, vd = tel.vel_ned_m_s
+    reach = _reach(limits)
+    r = math.hypot(pn, pe)
+    h_gap, v_gap = limits.geofence_radius_m - r, limits.max_alt_m + pd
+    if h_gap > reach and v_gap > reach:
+        return None
+    codes = []
+    if r > 1e-9 and h_gap <= reach:
+        un, ue = pn / r, pe / r              # outward unit vector
+        out = n * un + e * ue                # commanded outward component
+        allowed = _allowed(velocity, outward_limit(h_gap, limits), vn * un + ve * ue, limits)
+        if out > allowed + 1e-9:
+            n, e = n - (out - allowed) * un, e - (out - allowed) * ue
+            codes.append("geofence")
+    if v_gap <= reach:
+        allowed = _allowed(velocity, outward_limit(v_gap, limits), -vd, limits)
+        if -d > allowed + 1e-9:              # upward is -d
+            d = -allowed
+            codes.append("ceiling")
+    return ((n, e, d), codes) if codes else None
+
+
+def _allowed(velocity: bool, speed_limit: float, outward_speed: float, limits: SafetyLimits) -> float:
+    """The outward component a velocity (the braking profile itself) or an acceleration (steering the
+    outward velocity onto that profile, within the acceleration limit) may have."""
+    if velocity:
+        return speed_limit
+    # Following the braking profile outward at speed v takes about the deceleration b * v / limit
+    # (feed-forward); the gain term pulls a velocity off the profile back onto it.
+    follow = -limits.brake_m_s2 * min(max(outward_speed / speed_limit, 0.0), 1.0) if speed_limit > 0 else 0.0
+    return max(follow + VELOCITY_GAIN_1_S * (speed_limit - outward_speed), -limits.max_accel_m_s2)
+
+
+def safety_event(sp: Setpoint, verdict: Verdict, tel: Telemetry) -> dict[str, object]:
+    """The fields of a ``safety`` event for a setpoint the monitor changed: the reason code, what was
+    asked and what is flown, and where the vehicle was (radius from the origin, altitude)."""
+    p = tel.pos_ned_m
+    flown = verdict.setpoint
+    return {"reason": verdict.reason, "kind": sp.kind.name.lower(),
+            "requested": [float(x) for x in sp.ned],
+            "flown": None if flown is None else [round(float(x), 6) for x in flown.ned],
+            "radius_m": round(math.hypot(p[0], p[1]), 3), "alt_m": round(-p[2], 3)}

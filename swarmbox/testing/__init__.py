@@ -9,6 +9,7 @@ from swarmbox.testing.backend_suite import (
     BACKEND_CHECKS,
     BackendFactory,
     Flight,
+    check_acceleration_fence,
     check_disarmed_setpoint_ignored,
     check_hold_stops,
     check_mission_cycle,
@@ -16,6 +17,7 @@ from swarmbox.testing.backend_suite import (
     check_protocol,
     check_return_to_launch,
     check_setpoint_verdicts,
+    check_velocity_fence,
     run_backend_suite,
 )
 
@@ -23,5 +25,5 @@ __all__ = [
     "BACKEND_CHECKS", "BackendFactory", "ConformanceError", "ConformanceReport", "Flight", "check_algorithm",
     "check_disarmed_setpoint_ignored", "check_hold_stops", "check_mission_cycle",
     "check_nonfinite_setpoint_refused", "check_protocol", "check_return_to_launch", "check_setpoint_verdicts",
-    "run_backend_suite",
+    "check_acceleration_fence", "check_velocity_fence", "run_backend_suite",
 ]

@@ -1,6 +1,7 @@
 """Conformance suite every :class:`~swarmbox.hal.vehicle.Backend` must pass.
 
-Each check is a plain function taking a *factory* — ``factory(homes_ned_m) -> Backend`` — builds a
+Each check is a plain function taking a *factory* — ``factory(homes_ned_m, **backend_kw) -> Backend``,
+where the fence checks pass ``limits=`` (a :class:`~swarmbox.hal.safety.SafetyLimits`) — builds a
 fresh fleet, flies it through one scenario and asserts numeric properties of the telemetry and
 events. Use them from pytest::
 
@@ -20,6 +21,8 @@ Scenarios (two vehicles; the second is never commanded and must stay disarmed at
   keeps its previous target.
 - ``check_setpoint_verdicts`` — ``setpoint`` returns the safety monitor's verdict (ok, clamped or
   refused, with the reason) for every setpoint: what the framework writes to ``setpoints.parquet``.
+- ``check_velocity_fence``, ``check_acceleration_fence`` — a velocity / an acceleration flying out and
+  up stays within a 12 m geofence (+1 m) and a 7 m ceiling (+0.5 m); verdicts ``clamped``, events logged.
 - ``check_hold_stops`` — ``hold()`` brakes a moving vehicle and keeps it still.
 - ``check_disarmed_setpoint_ignored`` — setpoints to a disarmed vehicle move nothing.
 
@@ -33,6 +36,7 @@ import time
 from collections.abc import Callable, Sequence
 
 from swarmbox.api import FlightMode, Setpoint, SetpointVerdict, Telemetry
+from swarmbox.hal.safety import SafetyLimits
 from swarmbox.hal.vehicle import Backend, Vehicle, VehicleEvent
 
 Vec3 = tuple[float, float, float]
@@ -251,19 +255,21 @@ def check_disarmed_setpoint_ignored(factory: BackendFactory, tick_s: float = 0.0
 
 
 def check_setpoint_verdicts(factory: BackendFactory, tick_s: float = 0.025) -> None:
-    """Every setpoint gets a verdict: ok, clamped (geofence, ceiling, speed) or refused (non-finite,
-    absurd jump), each but ok with its reason."""
+    """Every setpoint gets a verdict: ok, clamped (geofence, ceiling, floor, speed, accel) or refused
+    (non-finite, absurd jump), each but ok with its reason code."""
     backend = _fleet(factory)
     f, v, home = Flight(backend, tick_s), backend.vehicles[0], HOMES[0]
     try:
         f.airborne(0)
         hold = Setpoint.position(*offset(home, 0.0, 0.0, -TAKEOFF_ALT_M))
         cases = [(hold, "ok", ""),
-                 (Setpoint.position(math.nan, 0.0, -3.0), "refused", "non-finite"),
-                 (Setpoint.position(home[0] + 1500.0, home[1], -3.0), "refused", "away"),
+                 (Setpoint.position(math.nan, 0.0, -3.0), "refused", "nonfinite"),
+                 (Setpoint.position(home[0] + 1500.0, home[1], -3.0), "refused", "jump"),
                  (Setpoint.position(home[0], home[1] + 600.0, -3.0), "clamped", "geofence"),
                  (Setpoint.position(home[0], home[1], -200.0), "clamped", "ceiling"),
-                 (Setpoint.velocity(0.0, 100.0, 0.0), "clamped", "norm")]
+                 (Setpoint.position(home[0], home[1], 3.0), "clamped", "floor"),
+                 (Setpoint.velocity(0.0, 100.0, 0.0), "clamped", "speed"),
+                 (Setpoint.acceleration(0.0, 100.0, 0.0), "clamped", "accel")]
         for sp, action, reason in cases:
             verdict = v.setpoint(sp)
             assert isinstance(verdict, SetpointVerdict), f"setpoint returned {verdict!r}, not a verdict"
@@ -275,9 +281,55 @@ def check_setpoint_verdicts(factory: BackendFactory, tick_s: float = 0.025) -> N
         backend.close()
 
 
+#: the envelope the fence checks fly against: small, so that a vehicle reaches it in seconds
+FENCE = SafetyLimits(geofence_radius_m=12.0, max_alt_m=7.0)
+FENCE_TOL_M, CEILING_TOL_M = 1.0, 0.5
+
+
+def _check_envelope(factory: BackendFactory, sp: Setpoint, fly_s: float, tick_s: float) -> None:
+    """Fly ``sp`` (outward and upward) for ``fly_s``: the vehicle stays within FENCE (+ tolerance),
+    the verdicts turn ``clamped`` naming geofence and ceiling, and safety events say so."""
+    backend = factory(list(HOMES), limits=FENCE)
+    f, v = Flight(backend, tick_s), backend.vehicles[0]
+    verdicts: list[SetpointVerdict] = []
+    reach = [0.0, 0.0]   # the largest radius and altitude seen
+
+    def fly() -> None:
+        verdicts.append(v.setpoint(sp))
+        n, e, d = f.tel().pos_ned_m
+        reach[0], reach[1] = max(reach[0], math.hypot(n, e)), max(reach[1], -d)
+
+    try:
+        f.airborne(0)
+        f.run_for(fly_s, fly)
+        assert reach[0] <= FENCE.geofence_radius_m + FENCE_TOL_M, f"flew to radius {reach[0]:.2f} m"
+        assert reach[1] <= FENCE.max_alt_m + CEILING_TOL_M, f"climbed to {reach[1]:.2f} m"
+        assert reach[0] > FENCE.geofence_radius_m - 2.0 and reach[1] > FENCE.max_alt_m - 1.0, (
+            f"never came near the envelope: radius {reach[0]:.2f} m, altitude {reach[1]:.2f} m")
+        last = verdicts[-1]
+        assert last.action == "clamped" and "geofence" in last.reason and "ceiling" in last.reason, last
+        codes = {e.data.get("reason") for e in f.events_of(0, "safety") if e.name == "setpoint_clamped"}
+        assert any("geofence" in c for c in codes) and any("ceiling" in c for c in codes), codes
+        f.land_and_disarm(0)
+        _assert_untouched(f)
+    finally:
+        backend.close()
+
+
+def check_velocity_fence(factory: BackendFactory, tick_s: float = 0.025) -> None:
+    """A velocity flying out through the geofence and up through the ceiling is stopped at both."""
+    _check_envelope(factory, Setpoint.velocity(5.0, 0.0, -2.0), 10.0, tick_s)
+
+
+def check_acceleration_fence(factory: BackendFactory, tick_s: float = 0.025) -> None:
+    """An acceleration flying out through the geofence and up through the ceiling is stopped at both."""
+    _check_envelope(factory, Setpoint.acceleration(2.0, 0.0, -1.0), 12.0, tick_s)
+
+
 BACKEND_CHECKS: tuple[Callable[..., None], ...] = (
     check_protocol, check_mission_cycle, check_return_to_launch, check_nonfinite_setpoint_refused,
-    check_hold_stops, check_disarmed_setpoint_ignored, check_setpoint_verdicts,
+    check_hold_stops, check_disarmed_setpoint_ignored, check_setpoint_verdicts, check_velocity_fence,
+    check_acceleration_fence,
 )
 
 

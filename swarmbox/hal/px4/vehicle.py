@@ -61,7 +61,7 @@ from swarmbox.hal.mavlink.paramset import ParamSetter
 from swarmbox.hal.mavlink.statustext import StatusTexts
 from swarmbox.hal.px4.linkreport import LinkReport
 from swarmbox.hal.px4.params import LinkConfig
-from swarmbox.hal.safety import SafetyLimits, check_setpoint
+from swarmbox.hal.safety import SafetyLimits, check_setpoint, safety_event
 
 Vec3 = tuple[float, float, float]
 #: emit(kind, name, data): an event of this vehicle, stamped by the backend.
@@ -158,9 +158,7 @@ class Px4Vehicle:
     def setpoint(self, sp: Setpoint) -> SetpointVerdict:
         verdict = check_setpoint(sp, self.telemetry(), self._limits)
         if verdict.action != "ok":
-            self._emit("safety", "setpoint_" + verdict.action,
-                       {"reason": verdict.reason, "kind": sp.kind.name.lower(),
-                        "requested": [float(x) for x in sp.ned]})
+            self._emit("safety", "setpoint_" + verdict.action, safety_event(sp, verdict, self.telemetry()))
         safe = verdict.setpoint
         result = SetpointVerdict(verdict.action, verdict.reason, safe)
         if safe is None:

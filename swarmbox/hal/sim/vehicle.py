@@ -15,7 +15,7 @@ import math
 from typing import Any, Protocol
 
 from swarmbox.api import FlightMode, Setpoint, SetpointKind, SetpointVerdict, Telemetry
-from swarmbox.hal.safety import SafetyLimits, check_setpoint
+from swarmbox.hal.safety import SafetyLimits, check_setpoint, near_boundary, safety_event
 from swarmbox.hal.sim.control import CascadedController
 from swarmbox.hal.sim.params import GRAVITY_M_S2, SimParams
 
@@ -136,9 +136,13 @@ class SimVehicle:
     def setpoint(self, sp: Setpoint) -> SetpointVerdict:
         if sp == self._last_ok and self.frozen is None:
             # the setpoint flown since last tick, passed unchanged then; in OFFBOARD and armed (any
-            # mode change forgets it). Only the jump limit depends on the vehicle's state.
-            if sp.kind is not _POSITION or math.dist(sp.ned, self._fleet.estimate_ned(self.drone_id)) <= \
-                    self._limits.max_jump_m:
+            # mode change forgets it). What depends on the vehicle's state: the jump limit of a
+            # position, the envelope near its boundary for a velocity or an acceleration.
+            est = self._fleet.estimate_ned(self.drone_id)
+            if sp.kind is _POSITION:
+                if math.dist(sp.ned, est) <= self._limits.max_jump_m:
+                    return self._ok_verdict
+            elif not near_boundary(est, self._limits):
                 return self._ok_verdict
         if self._refuse("setpoint"):
             return SetpointVerdict("ignored", "disarmed")
@@ -146,8 +150,7 @@ class SimVehicle:
         result = SetpointVerdict(verdict.action, verdict.reason, verdict.setpoint)
         if verdict.action != "ok":
             self._fleet.emit(self.drone_id, "safety", "setpoint_" + verdict.action,
-                         {"reason": verdict.reason, "kind": sp.kind.name.lower(),
-                          "requested": [float(x) for x in sp.ned]})
+                             safety_event(sp, verdict, self.telemetry()))
         sp = verdict.setpoint
         if sp is None or (self.mode is FlightMode.OFFBOARD and sp == self._last_sp):
             if sp is not None and verdict.action == "ok":

@@ -104,7 +104,7 @@ def _position(sp: Setpoint, tel: Telemetry, limits: SafetyLimits) -> Verdict:
     return Verdict(sp, _OK)
 
 
-def _reach(limits: SafetyLimits) -> float:
+def reach_m(limits: SafetyLimits) -> float:
     """How near a boundary a velocity or acceleration can be limited: the stopping distance of the
     fastest allowed flight plus a second of it. Farther from both, nothing is (the usual case)."""
     return limits.max_speed_m_s * (limits.max_speed_m_s / (2.0 * limits.brake_m_s2) + limits.response_s + 1.0)
@@ -112,7 +112,7 @@ def _reach(limits: SafetyLimits) -> float:
 
 def near_boundary(pos_ned_m: tuple[float, float, float], limits: SafetyLimits) -> bool:
     """Whether a velocity or acceleration setpoint flown at ``pos_ned_m`` may need limiting."""
-    reach = _reach(limits)
+    reach = reach_m(limits)
     return (limits.geofence_radius_m - math.hypot(pos_ned_m[0], pos_ned_m[1]) <= reach
             or limits.max_alt_m + pos_ned_m[2] <= reach)
 
@@ -131,7 +131,7 @@ def _fence(velocity: bool, cmd: tuple[float, float, float], tel: Telemetry,
     n, e, d = cmd
     pn, pe, pd = tel.pos_ned_m
     vn, ve, vd = tel.vel_ned_m_s
-    reach = _reach(limits)
+    reach = reach_m(limits)
     r = math.hypot(pn, pe)
     h_gap, v_gap = limits.geofence_radius_m - r, limits.max_alt_m + pd
     if h_gap > reach and v_gap > reach:
@@ -172,3 +172,27 @@ def safety_event(sp: Setpoint, verdict: Verdict, tel: Telemetry) -> dict[str, ob
             "requested": [float(x) for x in sp.ned],
             "flown": None if flown is None else [round(float(x), 6) for x in flown.ned],
             "radius_m": round(math.hypot(p[0], p[1]), 3), "alt_m": round(-p[2], 3)}
+
+
+class HeldSetpoint:
+    """The velocity or acceleration a vehicle keeps flying after the algorithm stopped sending it
+    (a hook that returns None holds the last setpoint): judged again on the vehicle's state at every
+    step without a new one, so that no held command flies through the fence."""
+
+    __slots__ = ("fresh", "requested")
+
+    def __init__(self) -> None:
+        self.requested: Setpoint | None = None
+        self.fresh = False
+
+    def asked(self, sp: Setpoint | None) -> None:
+        """A setpoint was flown (None: the vehicle left OFFBOARD, nothing held)."""
+        self.requested = sp if sp is not None and sp.kind is not _POSITION else None
+        self.fresh = True
+
+    def stale(self) -> Setpoint | None:
+        """The held request when no setpoint came since the last call, else None."""
+        if self.fresh:
+            self.fresh = False
+            return None
+        return self.requested

@@ -11,6 +11,7 @@ from swarmbox.testing.backend_suite import (
     Flight,
     check_acceleration_fence,
     check_disarmed_setpoint_ignored,
+    check_held_velocity_fence,
     check_hold_stops,
     check_mission_cycle,
     check_nonfinite_setpoint_refused,
@@ -25,5 +26,5 @@ __all__ = [
     "BACKEND_CHECKS", "BackendFactory", "ConformanceError", "ConformanceReport", "Flight", "check_algorithm",
     "check_disarmed_setpoint_ignored", "check_hold_stops", "check_mission_cycle",
     "check_nonfinite_setpoint_refused", "check_protocol", "check_return_to_launch", "check_setpoint_verdicts",
-    "check_acceleration_fence", "check_velocity_fence", "run_backend_suite",
+    "check_acceleration_fence", "check_held_velocity_fence", "check_velocity_fence", "run_backend_suite",
 ]

@@ -23,6 +23,7 @@ Scenarios (two vehicles; the second is never commanded and must stay disarmed at
   refused, with the reason) for every setpoint: what the framework writes to ``setpoints.parquet``.
 - ``check_velocity_fence``, ``check_acceleration_fence`` — a velocity / an acceleration flying out and
   up stays within a 12 m geofence (+1 m) and a 7 m ceiling (+0.5 m); verdicts ``clamped``, events logged.
+- ``check_held_velocity_fence`` — the same for a velocity sent for 1 s and then held, never sent again.
 - ``check_hold_stops`` — ``hold()`` brakes a moving vehicle and keeps it still.
 - ``check_disarmed_setpoint_ignored`` — setpoints to a disarmed vehicle move nothing.
 
@@ -286,16 +287,21 @@ FENCE = SafetyLimits(geofence_radius_m=12.0, max_alt_m=7.0)
 FENCE_TOL_M, CEILING_TOL_M = 1.0, 0.5
 
 
-def _check_envelope(factory: BackendFactory, sp: Setpoint, fly_s: float, tick_s: float) -> None:
-    """Fly ``sp`` (outward and upward) for ``fly_s``: the vehicle stays within FENCE (+ tolerance),
-    the verdicts turn ``clamped`` naming geofence and ceiling, and safety events say so."""
+def _check_envelope(factory: BackendFactory, sp: Setpoint, fly_s: float, tick_s: float,
+                    send_s: float = math.inf) -> None:
+    """Fly ``sp`` (outward and upward) for ``fly_s``, sent every tick for ``send_s`` and then held: the
+    vehicle stays within FENCE (+ tolerance), the verdicts turn ``clamped`` naming geofence and
+    ceiling, and safety events say so."""
     backend = factory(list(HOMES), limits=FENCE)
     f, v = Flight(backend, tick_s), backend.vehicles[0]
-    verdicts: list[SetpointVerdict] = []
+    verdicts: list[SetpointVerdict] = [v.setpoint(sp)] if send_s < math.inf else []
     reach = [0.0, 0.0]   # the largest radius and altitude seen
+    start = [-1.0]
 
     def fly() -> None:
-        verdicts.append(v.setpoint(sp))
+        start[0] = f.t_s if start[0] < 0 else start[0]
+        if f.t_s - start[0] < send_s:
+            verdicts.append(v.setpoint(sp))
         n, e, d = f.tel().pos_ned_m
         reach[0], reach[1] = max(reach[0], math.hypot(n, e)), max(reach[1], -d)
 
@@ -306,8 +312,9 @@ def _check_envelope(factory: BackendFactory, sp: Setpoint, fly_s: float, tick_s:
         assert reach[1] <= FENCE.max_alt_m + CEILING_TOL_M, f"climbed to {reach[1]:.2f} m"
         assert reach[0] > FENCE.geofence_radius_m - 2.0 and reach[1] > FENCE.max_alt_m - 1.0, (
             f"never came near the envelope: radius {reach[0]:.2f} m, altitude {reach[1]:.2f} m")
-        last = verdicts[-1]
-        assert last.action == "clamped" and "geofence" in last.reason and "ceiling" in last.reason, last
+        if send_s == math.inf:
+            last = verdicts[-1]
+            assert last.action == "clamped" and "geofence" in last.reason and "ceiling" in last.reason, last
         codes = {e.data.get("reason") for e in f.events_of(0, "safety") if e.name == "setpoint_clamped"}
         assert any("geofence" in c for c in codes) and any("ceiling" in c for c in codes), codes
         f.land_and_disarm(0)
@@ -326,10 +333,15 @@ def check_acceleration_fence(factory: BackendFactory, tick_s: float = 0.025) -> 
     _check_envelope(factory, Setpoint.acceleration(2.0, 0.0, -1.0), 12.0, tick_s)
 
 
+def check_held_velocity_fence(factory: BackendFactory, tick_s: float = 0.025) -> None:
+    """A velocity sent for 1 s and then no more (the vehicle keeps flying it) is stopped at both too."""
+    _check_envelope(factory, Setpoint.velocity(5.0, 0.0, -2.0), 10.0, tick_s, send_s=1.0)
+
+
 BACKEND_CHECKS: tuple[Callable[..., None], ...] = (
     check_protocol, check_mission_cycle, check_return_to_launch, check_nonfinite_setpoint_refused,
     check_hold_stops, check_disarmed_setpoint_ignored, check_setpoint_verdicts, check_velocity_fence,
-    check_acceleration_fence,
+    check_acceleration_fence, check_held_velocity_fence,
 )
 
 

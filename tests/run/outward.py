@@ -22,3 +22,11 @@ class OutwardDrone(DroneAlgorithm):
 
     def exec_complete(self, ctx):
         return ctx.stage_time_s >= float(ctx.params["fly_s"])
+
+
+class OnceOutwardDrone(OutwardDrone):
+    """Sends its velocity or acceleration for the first 2 s only, then returns None: the vehicle keeps
+    flying it."""
+
+    def exec_loop(self, ctx):
+        return self.setpoint if ctx.stage_time_s < 2.0 else None

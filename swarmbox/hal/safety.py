@@ -130,7 +130,7 @@ def _fence(velocity: bool, cmd: tuple[float, float, float], tel: Telemetry,
     """``cmd`` (a velocity, or an acceleration) with its outward parts limited; None if unchanged."""
     n, e, d = cmd
     pn, pe, pd = tel.pos_ned_m
-    vn, ve, vd = tel.vel_ned_m_s
+    vd = tel.vel_ned_m_s[2]
     reach = reach_m(limits)
     r = math.hypot(pn, pe)
     h_gap, v_gap = limits.geofence_radius_m - r, limits.max_alt_m + pd
@@ -138,12 +138,9 @@ def _fence(velocity: bool, cmd: tuple[float, float, float], tel: Telemetry,
         return None
     codes = []
     if r > 1e-9 and h_gap <= reach:
-        un, ue = pn / r, pe / r              # outward unit vector
-        out = n * un + e * ue                # commanded outward component
-        allowed = _allowed(velocity, outward_limit(h_gap, limits), vn * un + ve * ue, limits)
-        if out > allowed + 1e-9:
-            n, e = n - (out - allowed) * un, e - (out - allowed) * ue
-            codes.append("geofence")
+        fenced = _fence_h(velocity, (n, e), (pn / r, pe / r), r, h_gap, tel, limits)
+        if fenced is not None:
+            (n, e), _ = fenced, codes.append("geofence")
     if v_gap <= reach:
         allowed = _allowed(velocity, outward_limit(v_gap, limits), -vd, limits)
         if -d > allowed + 1e-9:              # upward is -d
@@ -152,11 +149,41 @@ def _fence(velocity: bool, cmd: tuple[float, float, float], tel: Telemetry,
     return ((n, e, d), codes) if codes else None
 
 
+def _fence_h(velocity: bool, cmd: tuple[float, float], out: tuple[float, float], r: float, gap: float,
+             tel: Telemetry, limits: SafetyLimits) -> tuple[float, float] | None:
+    """The horizontal command near the fence (``out``: the outward unit vector); None if unchanged."""
+    n, e = cmd
+    un, ue = out
+    vn, ve = tel.vel_ned_m_s[0], tel.vel_ned_m_s[1]
+    v_out = vn * un + ve * ue
+    allowed = _allowed(velocity, outward_limit(gap, limits), v_out, limits)
+    tn, te = -ue, un                        # along the fence
+    v_side = vn * tn + ve * te
+    a_side = n * tn + e * te
+    if not velocity:
+        # Flying along a curved fence takes v²/r inward, and more than the acceleration limit can
+        # give minus the braking reserve is not to be had: a faster sideways flight is slowed down.
+        allowed -= v_side * v_side / r
+        side_max = math.sqrt(max(limits.max_accel_m_s2 - limits.brake_m_s2, 0.5) * r)
+        over = abs(v_side) - side_max
+        if over > 0 and a_side * math.copysign(1.0, v_side) > -VELOCITY_GAIN_1_S * over:
+            a_side = -math.copysign(VELOCITY_GAIN_1_S * over, v_side)
+        else:
+            over = 0.0
+    a_out = n * un + e * ue
+    if a_out <= allowed + 1e-9 and (velocity or over <= 0):
+        return None
+    a_out = min(a_out, allowed)
+    return a_out * un + a_side * tn, a_out * ue + a_side * te
+
+
 def _allowed(velocity: bool, speed_limit: float, outward_speed: float, limits: SafetyLimits) -> float:
     """The outward component a velocity (the braking profile itself) or an acceleration (steering the
     outward velocity onto that profile, within the acceleration limit) may have."""
     if velocity:
-        return speed_limit
+        # A vehicle already moving out faster than the limit (its response lags the command, or a
+        # sideways flight along the curved fence carries it out) is asked for that much less.
+        return speed_limit - max(outward_speed - max(speed_limit, 0.0), 0.0)
     # Following the braking profile outward at speed v takes about the deceleration b * v / limit
     # (feed-forward); the gain term pulls a velocity off the profile back onto it.
     follow = -limits.brake_m_s2 * min(max(outward_speed / speed_limit, 0.0), 1.0) if speed_limit > 0 else 0.0

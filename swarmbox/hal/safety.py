@@ -223,3 +223,21 @@ class HeldSetpoint:
             self.fresh = False
             return None
         return self.requested
+
+
+#: PX4's geofence action on a breach (GF_ACTION): 3 = return to launch
+PX4_GF_ACTION_RTL = 3
+PX4_FENCE_MARGIN_M = 5.0       # PX4's own fence sits this far outside the monitor's (horizontal)
+PX4_CEILING_MARGIN_M = 2.0     # ... and above its ceiling
+
+
+def px4_geofence(limits: SafetyLimits, home_ned_m: tuple[float, float, float]) -> dict[str, float | int]:
+    """PX4 parameters for its own geofence, a second layer just outside the monitor's envelope.
+
+    PX4 measures from the vehicle's home, the monitor from the mission origin: every point inside
+    the mission's fence is within ``radius + |home|`` of home, every point under the ceiling within
+    ``max_alt + d_home`` above it."""
+    n, e, d = home_ned_m
+    return {"GF_MAX_HOR_DIST": round(limits.geofence_radius_m + math.hypot(n, e) + PX4_FENCE_MARGIN_M, 3),
+            "GF_MAX_VER_DIST": round(limits.max_alt_m + d + PX4_CEILING_MARGIN_M, 3),
+            "GF_ACTION": PX4_GF_ACTION_RTL}

@@ -106,3 +106,16 @@ def test_near_the_ceiling_an_acceleration_brakes_the_climb():
     slow = check_setpoint(Setpoint.acceleration(0.0, 0.0, -2.0), at(0.0, 0.0, -100.0, vel=(0, 0, -0.5)),
                           LIMITS)
     assert slow.action == "ok"   # 20 m below at 0.5 m/s: nothing to brake yet
+
+
+def test_px4_geofence_sits_just_outside_the_envelope_measured_from_each_home():
+    from swarmbox.hal.px4.sitl import SitlOptions, instance_env
+    from swarmbox.hal.safety import PX4_CEILING_MARGIN_M, PX4_FENCE_MARGIN_M, px4_geofence
+
+    lim = SafetyLimits(geofence_radius_m=50.0, max_alt_m=10.0)
+    gf = px4_geofence(lim, (30.0, 40.0, 0.0))   # 50 m from the origin: 100 m of fence beyond it
+    assert gf == {"GF_MAX_HOR_DIST": 100.0 + PX4_FENCE_MARGIN_M, "GF_MAX_VER_DIST": 10.0 + PX4_CEILING_MARGIN_M,
+                  "GF_ACTION": 3}
+    assert px4_geofence(lim, (0.0, 0.0, -4.0))["GF_MAX_VER_DIST"] == 6.0 + PX4_CEILING_MARGIN_M
+    env = instance_env((47.0, 8.0, 488.0), SitlOptions(params={"GF_ACTION": 2}), 1.0, {}, gf)
+    assert env["PX4_PARAM_GF_MAX_HOR_DIST"] == "105.0" and env["PX4_PARAM_GF_ACTION"] == "2"   # user's wins

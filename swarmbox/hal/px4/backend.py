@@ -111,7 +111,7 @@ class Px4Backend:
         p = self.params
         if (p.connections and str(p.px4_build).lower() == "auto") or resolve_build(p.px4_build) is None:
             return None   # listed connections: vehicles that already run
-        return SitlLauncher(self.params, homes, self.frame, self.run_dir)
+        return SitlLauncher(self.params, homes, self.frame, self.run_dir, self.limits)
 
     def _open(self, homes: list[Vec3]) -> None:
         p, n = self.params, len(homes)

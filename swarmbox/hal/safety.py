@@ -27,8 +27,10 @@ from swarmbox.api import Setpoint, SetpointKind, Telemetry
 #: every reason code the monitor gives, in the order a combined reason lists them
 REASONS = ("nonfinite", "jump", "speed", "accel", "geofence", "ceiling", "floor")
 _POSITION, _VELOCITY = SetpointKind.POSITION, SetpointKind.VELOCITY
-RETURN_GAIN_1_S = 0.5     # a vehicle past a boundary is sent back at this gain (m/s per m) ...
-VELOCITY_GAIN_1_S = 2.0   # an acceleration steers the outward velocity to its limit at this gain
+RETURN_GAIN_1_S = 1.0     # a vehicle past a boundary is sent back at this gain (m/s per m) ...
+# An acceleration steers the outward velocity onto its limit at this gain: high enough to beat an
+# autopilot's thrust bias (PX4 SIH climbed on 0.6 m/s² of commanded descent at a gain of 2).
+VELOCITY_GAIN_1_S = 4.0
 
 
 @dataclass(frozen=True, slots=True)

@@ -91,8 +91,8 @@ def test_near_the_fence_the_outward_speed_leaves_room_to_brake_and_the_sideways_
 def test_at_or_past_a_boundary_nothing_outward_is_left_and_past_it_the_way_back_is_commanded():
     on = check_setpoint(Setpoint.velocity(3.0, 0.0, 0.0), at(500.0, 0.0), LIMITS)
     assert on.setpoint.ned == pytest.approx((0.0, 0.0, 0.0)) and on.reason == "geofence"
-    past = check_setpoint(Setpoint.velocity(3.0, 0.0, 0.0), at(0.0, -501.0), LIMITS)   # 1 m out, west
-    assert past.setpoint.ned == pytest.approx((3.0, 0.5, 0.0))   # 0.5 m/s back east, north kept
+    past = check_setpoint(Setpoint.velocity(3.0, 0.0, 0.0), at(0.0, -500.4), LIMITS)   # 0.4 m out, west
+    assert past.setpoint.ned == pytest.approx((3.0, 0.4, 0.0))   # 0.4 m/s back east, north kept
     far_out = check_setpoint(Setpoint.velocity(0.0, 0.0, -2.0), at(0.0, 0.0, -130.0), LIMITS)
     assert far_out.reason == "ceiling" and far_out.setpoint.ned == pytest.approx((0.0, 0.0, 1.0))
 
@@ -114,8 +114,8 @@ def test_px4_geofence_sits_just_outside_the_envelope_measured_from_each_home():
 
     lim = SafetyLimits(geofence_radius_m=50.0, max_alt_m=10.0)
     gf = px4_geofence(lim, (30.0, 40.0, 0.0))   # 50 m from the origin: 100 m of fence beyond it
-    assert gf == {"GF_MAX_HOR_DIST": 100.0 + PX4_FENCE_MARGIN_M, "GF_MAX_VER_DIST": 10.0 + PX4_CEILING_MARGIN_M,
-                  "GF_ACTION": 3}
+    assert gf == {"GF_MAX_HOR_DIST": 100.0 + PX4_FENCE_MARGIN_M,
+                  "GF_MAX_VER_DIST": 10.0 + PX4_CEILING_MARGIN_M, "GF_ACTION": 3}
     assert px4_geofence(lim, (0.0, 0.0, -4.0))["GF_MAX_VER_DIST"] == 6.0 + PX4_CEILING_MARGIN_M
     env = instance_env((47.0, 8.0, 488.0), SitlOptions(params={"GF_ACTION": 2}), 1.0, {}, gf)
     assert env["PX4_PARAM_GF_MAX_HOR_DIST"] == "105.0" and env["PX4_PARAM_GF_ACTION"] == "2"   # user's wins

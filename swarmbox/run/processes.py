@@ -307,7 +307,9 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         status, reason = outcome(results)
         g = results[node_name(GROUND_ID)]
         manifest.update(status=status, reason=reason, node_results=results, ticks=g.get("ticks", 0),
-                        sim_time_s=g.get("sim_time_s", 0.0))
+                        sim_time_s=g.get("sim_time_s", 0.0),
+                        tasks_refused={k: r["tasks_refused"] for k, r in results.items()
+                                       if r.get("tasks_refused")})
     except KeyboardInterrupt:
         manifest.update(status="aborted", reason="interrupted (Ctrl-C)")
     except Exception as exc:

@@ -23,7 +23,7 @@ from swarmbox.api import (
     Telemetry,
 )
 from swarmbox.api.views import read_only, read_only_mission
-from swarmbox.core.delivery import Window
+from swarmbox.core.delivery import DELIVERED, NEW, Window
 from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck, TaskCommand
 from swarmbox.core.node import STAGE_OF, Node, call_hook, hook_error
 from swarmbox.core.rows import NO_TEXT, TEXTS, pack_setpoint
@@ -160,15 +160,33 @@ class AgentNode(Node):
             if cmd.stage <= self.stage or self.stage is Stage.ABORT:
                 self._deliver(cmd)   # best effort: one from a stage not reached yet is dropped
             return
-        self.net.send(TaskAck(self.next_msg_id(), self.clock.now(), self.node_id, cmd.src, cmd.seq),
-                      cmd.src)
-        if self._window.accept(cmd, self.time.tick):
+        verdict = self._window.accept(cmd, self.time.tick)
+        if verdict is NEW:
             self._deliver_ready(cmd.src)
             self._window_busy = True
+        elif verdict is DELIVERED:   # its acknowledgement was lost: say it again
+            self._ack(cmd)
+        if self._window.notes:
+            self._log_skips()
 
     def _deliver_ready(self, src: int) -> None:
+        """Hand over what the window releases; each is acknowledged only once ``on_task`` has it."""
         for cmd in self._window.release(src, int(self.stage), self.time.tick):
             self._deliver(cmd)
+            self._ack(cmd)
+        if self._window.notes:
+            self._log_skips()
+
+    def _ack(self, cmd: TaskCommand) -> None:
+        self.net.send(TaskAck(self.next_msg_id(), self.clock.now(), self.node_id, cmd.src, cmd.seq,
+                              cmd.incarnation), cmd.src)
+
+    def _log_skips(self) -> None:
+        """Every reliable task this drone will never deliver, as ``error/task_skipped`` events."""
+        for skip in self._window.notes:
+            self.event("error", "task_skipped", skip.src, first=skip.first, last=skip.last,
+                       incarnation=skip.incarnation, reason=skip.reason)
+        self._window.notes.clear()
 
     def _deliver(self, cmd: TaskCommand) -> None:
         task = self.last_task = Task(cmd.src, cmd.seq, cmd.reliable, cmd.code, cmd.waypoint_ned_m,

@@ -9,6 +9,11 @@ The ground advances when every *alive* direct inferior reports complete for the 
 stage and the ground's own ``*_complete`` hook agreed on the previous tick (ICEBREAK also needs the
 expected head-count); it aborts with a reason on a stage timeout or when fewer than ``min_alive``
 drones remain, instead of stalling.
+
+A ground process started again during a run (:meth:`GroundNode.rejoin`) does not command ICEBREAK
+to a swarm in flight: it listens first, until the whole swarm has reported or ``lost_inferior_ticks``
+have passed, then adopts the most advanced stage its drones report (ABORT only if all report it),
+walking there stage by stage so that each stage's entry hook runs, as on a drone that joins late.
 """
 
 from __future__ import annotations
@@ -17,10 +22,10 @@ from typing import Protocol
 
 from swarmbox.api import DescendantState, GroundAlgorithm, GroundContext
 from swarmbox.api.views import read_only, read_only_mission
-from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck
+from swarmbox.core.messages import GROUND_ID, NO_SUBJECT, Heartbeat, ProxAlert, Report, TaskAck
 from swarmbox.core.node import STAGE_OF, Node, call_hook, new_inferior_report
 from swarmbox.core.proximity import DIRECT_PAIRS_UP_TO, Episode, ProximityTracker, kd_tree
-from swarmbox.core.stages import TERMINAL, Stage
+from swarmbox.core.stages import TERMINAL, Stage, path_to
 
 _ZERO3 = (0.0, 0.0, 0.0)
 _NO_DRONES: frozenset[int] = frozenset()
@@ -51,6 +56,7 @@ class GroundNode(Node):
         self.proximity = ProximityTracker(self.timing.proximity_m, self.timing.proximity_window_s)
         self.prox_pairs: dict[tuple[int, int], float] = {}   # alerted pair -> distance, this tick
         self.observer: GroundObserver | None = None
+        self._adopt_until: int | None = None   # a restarted ground listens until this tick (rejoin)
         # the base class's on_report does nothing: not calling it saves a call per Report
         self._wants_reports = type(algorithm).on_report is not GroundAlgorithm.on_report
         if self.mission.swarm_size > DIRECT_PAIRS_UP_TO:
@@ -61,6 +67,8 @@ class GroundNode(Node):
         self.stage_tick += 1
         self._drain_inbox()
         self.age_inferiors()
+        if self._adopt_until is not None and not self._adopt_stage():
+            return   # still listening: no Heartbeat that could contradict the swarm's stage
         self._advance(self._satisfied)
         self.net.publish(Heartbeat(self.next_msg_id(), self.clock.now(), GROUND_ID, self.stage_code, (),
                                    _ZERO3, _ZERO3))
@@ -121,6 +129,27 @@ class GroundNode(Node):
             ready = ready and total >= self.mission.swarm_size
         if ready:
             self.enter(Stage(stage + 1))
+
+    def rejoin(self) -> None:
+        """This process restarts the ground of a run under way: adopt the swarm's stage from the
+        drones' Reports instead of starting the mission over."""
+        self._adopt_until = self.time.tick + self.timing.lost_inferior_ticks
+
+    def _adopt_stage(self) -> bool:
+        """True once the stage is adopted (the swarm reported, or the listening time is over)."""
+        total, _ = self.head_count()
+        if total < self.mission.swarm_size and self.time.tick < self._adopt_until:
+            return False
+        self._adopt_until = None
+        reported = {i: r.stage for i, r in sorted(self.alive_reports().items())}
+        flying = [s for s in reported.values() if s is not Stage.ABORT]
+        target = max(flying) if flying else (Stage.ABORT if reported else Stage.ICEBREAK)
+        self.event("topology", "stage_adopted", NO_SUBJECT, stage=target.name, drones=total,
+                   reported={str(i): s.name for i, s in reported.items()})
+        if target is not Stage.ICEBREAK:
+            for stage in path_to(Stage.ICEBREAK, target):
+                self.enter(stage, "adopted from the drones' reports after a restart")
+        return True
 
     def enter(self, stage: Stage, reason: str = "") -> None:
         self.set_stage(stage, reason)

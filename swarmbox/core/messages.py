@@ -47,9 +47,20 @@ def broadcast_dsts(dsts: tuple[int, ...] | list[int]) -> str:
     return ",".join(map(str, dsts))
 
 
-def make_msg_id(src: int, seq: int) -> int:
-    """A run-unique message id from the sender id and the sender's message counter."""
-    return ((src + 2) << 40) | seq
+#: Bits of a message id: the sender's counter below :data:`SEQ_BITS`, then the low eight bits of the
+#: sender's incarnation, then the sender id (+2) from bit 40.
+SEQ_BITS = 32
+INCARNATION_MAX = 2**32 - 1
+
+
+def make_msg_id(src: int, seq: int, incarnation: int = 0) -> int:
+    """A run-unique message id from the sender id, its incarnation and its message counter.
+
+    The incarnation (a node's boot count) keeps a restarted node's ids apart from those of its
+    earlier processes; ids repeat only after 256 restarts of one node within one run. Incarnation 0
+    (every node of a single-process run) gives ``((src + 2) << 40) | seq``.
+    """
+    return ((src + 2) << 40) | ((incarnation & 0xFF) << SEQ_BITS) | seq
 
 
 class Heartbeat(NamedTuple):
@@ -97,11 +108,13 @@ class Report(NamedTuple):
 class TaskCommand(NamedTuple):
     """A superior's command to one inferior. Its meaning (``code``, ``data``) belongs to the algorithm.
 
-    ``reliable`` commands are numbered per (sender, receiver) from 1, acknowledged by a
-    :class:`TaskAck` and re-sent until acknowledged; ``floor`` is the lowest number the sender still
-    tries to deliver (lower ones are acknowledged or abandoned), so the receiver's window can skip
-    an abandoned gap. ``stage`` is the sender's stage at send time: the receiver hands the command to
-    its algorithm only once it is in that stage too. Best-effort commands carry their own counter.
+    ``reliable`` commands are numbered per (sender incarnation, receiver) from 1, acknowledged by a
+    :class:`TaskAck` once delivered and re-sent until acknowledged; ``floor`` is the lowest number the
+    sender still tries to deliver (lower ones are acknowledged or abandoned), so the receiver's window
+    can skip an abandoned gap. ``stage`` is the sender's stage at send time: the receiver hands the
+    command to its algorithm only once it is in that stage too. ``incarnation`` is the sender's boot
+    count: a restarted sender numbers from 1 again under a higher one. Best-effort commands carry
+    their own counter.
     """
 
     msg_id: int
@@ -116,24 +129,27 @@ class TaskCommand(NamedTuple):
     data: str
     stage: int = 0
     floor: int = 0
+    incarnation: int = 0
 
     @property
     def nbytes(self) -> int:
-        return _HEADER + 4 + 1 + task_code_nbytes(self.code) + _VEC3 + 4 + 2 + len(self.data) + 1 + 4
+        return _HEADER + 4 + 1 + task_code_nbytes(self.code) + _VEC3 + 4 + 2 + len(self.data) + 1 + 4 + 4
 
 
 class TaskAck(NamedTuple):
-    """Acknowledges the reliable TaskCommand ``seq`` from ``dst`` (the original sender)."""
+    """Says the reliable TaskCommand ``seq`` of ``dst`` (the original sender) in its ``incarnation``
+    reached the receiver's algorithm; sent only once it did."""
 
     msg_id: int
     t_sent_s: float
     src: int
     dst: int
     seq: int
+    incarnation: int = 0
 
     @property
     def nbytes(self) -> int:
-        return _HEADER + 4
+        return _HEADER + 4 + 4
 
 
 class ProxAlert(NamedTuple):

@@ -81,8 +81,11 @@ class Node:
 
     def __init__(self, node_id: int, *, time: TimeSource, clock: NodeClock, net: Transport,
                  inbox: list, log: NodeLog, timing: CoreTiming, mission: MissionInfo,
-                 params: Mapping[str, Any], rng: np.random.Generator) -> None:
+                 params: Mapping[str, Any], rng: np.random.Generator, incarnation: int = 0) -> None:
         self.node_id = node_id
+        #: this process's boot count for the node (0 in a single-process run): in every message id,
+        #: reliable task and acknowledgement, so nothing a restarted node sends is taken for its past
+        self.incarnation = incarnation
         self.time, self.clock, self.net, self.inbox = time, clock, net, inbox
         self.timing, self.tick_s = timing, timing.tick_s
         self.mission, self.params, self.rng = mission, params, rng
@@ -95,8 +98,8 @@ class Node:
         self._alive_view = MappingProxyType(self._alive)
         self.regroup_until_tick = -1   # a lost inferior's own inferiors may still be handing over
         self._seq = 0
-        self._msg_id_base = make_msg_id(node_id, 0)   # | seq: the same id, one OR per message
-        self.outbox = Outbox(timing.task_retry_ticks, timing.task_max_retries)
+        self._msg_id_base = make_msg_id(node_id, 0, incarnation)   # | seq: one OR per message
+        self.outbox = Outbox(timing.task_retry_ticks, timing.task_max_retries, incarnation)
         self._log_stage = log.appender("stages")
         self._log_event = log.appender("events")
         self._log_stage((clock.now(), time.tick, int(Stage.ICEBREAK), Stage.ICEBREAK.name, ""))
@@ -158,7 +161,9 @@ class Node:
                 if inf.report.total_count > 1:
                     # its inferiors notice only after lost_superior_ticks, then hand over to us
                     self.regroup_until_tick = self.time.tick + self.timing.lost_superior_ticks + limit
-                self.outbox.forget(drone_id)
+                for seq, retries in self.outbox.forget(drone_id):
+                    self.event("error", "task_undelivered", drone_id, seq=seq, retries=retries,
+                               incarnation=self.incarnation, reason="receiver lost")
 
     def alive_reports(self) -> Mapping[int, InferiorReport]:
         """Read-only view of the latest Report of each alive direct inferior."""
@@ -203,13 +208,13 @@ class Node:
             return
         seq, floor = self.outbox.number(dst, reliable)
         cmd = TaskCommand(self.next_msg_id(), self.clock.now(), self.node_id, dst, seq, reliable,
-                          int(code), waypoint, yaw_rad, data, int(self.stage), floor)
+                          int(code), waypoint, yaw_rad, data, int(self.stage), floor, self.incarnation)
         self.net.send(cmd, dst)
         if reliable:
             self.outbox.track(cmd, self.time.tick)
 
     def on_ack(self, ack: TaskAck) -> None:
-        self.outbox.acked(ack.src, ack.seq)
+        self.outbox.acked(ack.src, ack.seq, ack.incarnation)   # one for an earlier process: ignored
 
     def retry_tasks(self) -> None:
         outbox = self.outbox
@@ -217,7 +222,8 @@ class Node:
             return
         resend, abandoned = outbox.due(self.time.tick)
         for dst, seq, retries in abandoned:
-            self.event("error", "task_undelivered", dst, seq=seq, retries=retries)
+            self.event("error", "task_undelivered", dst, seq=seq, retries=retries,
+                       incarnation=self.incarnation, reason="retries exhausted")
         for cmd in resend:
             self.net.send(cmd._replace(msg_id=self.next_msg_id(), t_sent_s=self.clock.now(),
                                        floor=outbox.floor(cmd.dst, cmd.seq)), cmd.dst)

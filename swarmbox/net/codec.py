@@ -30,8 +30,8 @@ _VEC = struct.Struct("<3f")
 _HB = struct.Struct("<bB")
 _REPORT = struct.Struct("<b?HH9fH")
 _TASK_HEAD = struct.Struct("<I?")
-_TASK_TAIL = struct.Struct("<bI4fH")
-_ACK = struct.Struct("<I")
+_TASK_TAIL = struct.Struct("<bII4fH")   # stage, floor, incarnation, waypoint, yaw, data length
+_ACK = struct.Struct("<II")   # seq, the acknowledged sender's incarnation
 _COUNT = struct.Struct("<H")
 _DESC = struct.Struct("<hb3f")
 _NAN3 = (math.nan, math.nan, math.nan)
@@ -115,9 +115,10 @@ def encode(msg) -> bytes:
         data = msg.data.encode()
         yaw = math.nan if msg.yaw_rad is None else msg.yaw_rad
         return (head + _TASK_HEAD.pack(msg.seq, msg.reliable) + _varint(check_task_code(msg.code))
-                + _TASK_TAIL.pack(msg.stage, msg.floor, *_vec(msg.waypoint_ned_m), yaw, len(data)) + data)
+                + _TASK_TAIL.pack(msg.stage, msg.floor, msg.incarnation, *_vec(msg.waypoint_ned_m), yaw,
+                                  len(data)) + data)
     if code == 4:
-        return head + _ACK.pack(msg.seq)
+        return head + _ACK.pack(msg.seq, msg.incarnation)
     return head + _COUNT.pack(len(msg.neighbours)) + _descs(msg.neighbours)
 
 
@@ -153,16 +154,16 @@ def _decode(buf: bytes):
     if code == 3:
         seq, reliable = _TASK_HEAD.unpack_from(buf, off)
         cmd, off = _unvarint(buf, off + _TASK_HEAD.size)
-        stage, floor, wn, we, wd, yaw, n = _TASK_TAIL.unpack_from(buf, off)
+        stage, floor, inc, wn, we, wd, yaw, n = _TASK_TAIL.unpack_from(buf, off)
         off += _TASK_TAIL.size
         data = buf[off:off + n].decode()
         _exact(buf, off + n)
         return TaskCommand(msg_id, t_sent, src, dst, seq, reliable, cmd, _opt((wn, we, wd)),
-                           None if math.isnan(yaw) else yaw, data, stage, floor)
+                           None if math.isnan(yaw) else yaw, data, stage, floor, inc)
     if code == 4:
-        (seq,) = _ACK.unpack_from(buf, off)
+        seq, inc = _ACK.unpack_from(buf, off)
         _exact(buf, off + _ACK.size)
-        return TaskAck(msg_id, t_sent, src, dst, seq)
+        return TaskAck(msg_id, t_sent, src, dst, seq, inc)
     if code == 5:
         (n,) = _COUNT.unpack_from(buf, off)
         off += _COUNT.size

@@ -8,7 +8,10 @@ Heartbeats (a subscriber declares interest in a publisher by subscribing to that
 Frames are the compact encoding of :mod:`swarmbox.net.codec`, signed by :mod:`swarmbox.net.auth`.
 The network fault models act at the receiver, once per (message, destination), exactly as in
 :class:`~swarmbox.net.medium.SimMedium`: the configured link latency/jitter/loss and any fault hook
-(burst loss, partition, link cut) delay or drop a message before the node sees it. Rows logged:
+(burst loss, partition, link cut) delay or drop a message before the node sees it. A frame is
+signed for the key expression it is published on, and a message addressed to another node is
+refused (``misdirected``): a frame captured on its way to one node cannot be replayed to another.
+Rows logged:
 ``send`` (sender, one per known destination), ``recv`` (receiver, stamped at arrival on its clock)
 and ``drop`` (receiver; fault drops and every rejected frame with its reason).
 """
@@ -59,7 +62,7 @@ class ZenohMedium:
         self._prefix = f"swarmbox/{auth.mission_id}"
         self._signer, self._verifier = Signer(auth, node_id), Verifier(auth)
         self._on_reject = on_reject or (lambda reason, sender: None)
-        self._arrived: deque = deque()          # (arrival wall s, frame), filled by Zenoh's threads
+        self._arrived: deque = deque()          # (arrival wall s, key expr, frame), filled by Zenoh's threads
         self._held: list = []                   # (due true s, seq, arrival true s, msg, nbytes)
         self._held_seq = 0
         self._log: Append = lambda row: None
@@ -71,7 +74,8 @@ class ZenohMedium:
         self._session = zenoh.open(session_config(listen, peers))
         self._subs: dict[int, object] = {}
         self._direct = self._session.declare_subscriber(f"{self._prefix}/to/{node_id}", self._on_sample)
-        self._hb_pub = self._session.declare_publisher(f"{self._prefix}/hb/{node_id}")
+        self._hb_key = f"{self._prefix}/hb/{node_id}"
+        self._hb_pub = self._session.declare_publisher(self._hb_key)
         self._pubs: dict[int, object] = {}
 
     # -- membership (the SimMedium interface, for the one local node) ---------------------------
@@ -106,7 +110,7 @@ class ZenohMedium:
     def publish(self, msg: Heartbeat) -> None:
         if not self.connected:
             return
-        frame = self._signer.sign(encode(msg))
+        frame = self._signer.sign(encode(msg), self._hb_key)
         for dst in self._static_subs.get(msg.src, ()):
             self._log_send(msg, dst, len(frame))
         self._hb_pub.put(frame)
@@ -115,11 +119,12 @@ class ZenohMedium:
     def send(self, msg, dst: int) -> None:
         if not self.connected:
             return
-        frame = self._signer.sign(encode(msg))
+        key = f"{self._prefix}/to/{dst}"
+        frame = self._signer.sign(encode(msg), key)
         self._log_send(msg, dst, len(frame))
         pub = self._pubs.get(dst)
         if pub is None:
-            pub = self._pubs[dst] = self._session.declare_publisher(f"{self._prefix}/to/{dst}")
+            pub = self._pubs[dst] = self._session.declare_publisher(key)
         pub.put(frame)
         self.bytes_out += len(frame)
 
@@ -128,26 +133,28 @@ class ZenohMedium:
                                MESSAGE_TYPE_CODES[type(msg)], msg.src, dst, nbytes, msg.t_sent_s, NO_TEXT))
 
     def _on_sample(self, sample) -> None:
-        self._arrived.append((wall.time(), bytes(sample.payload.to_bytes())))
+        self._arrived.append((wall.time(), str(sample.key_expr), bytes(sample.payload.to_bytes())))
 
     def deliver_due(self) -> None:
         """Verify and decode what has arrived, apply the link model, hand over what is due."""
         arrived = self._arrived
         while arrived:
-            t_wall, frame = arrived.popleft()
-            self._admit(self._true_of(t_wall), frame)
+            t_wall, key, frame = arrived.popleft()
+            self._admit(self._true_of(t_wall), key, frame)
         now = self._time.t_s + 1e-12
         while self._held and self._held[0][0] <= now:
             _, _, arrival, msg, nbytes = heapq.heappop(self._held)
             self._hand_over(arrival, msg, nbytes)
 
-    def _admit(self, arrival: float, frame: bytes) -> None:
+    def _admit(self, arrival: float, key: str, frame: bytes) -> None:
         self.bytes_in += len(frame)
         try:
-            sender, payload = self._verifier.open(frame)
+            sender, payload = self._verifier.open(frame, key)
             msg = decode(payload)
             if msg.src != sender:
                 raise Rejected("forged", sender)
+            if type(msg) is not Heartbeat and msg.dst != self.node_id:   # signed, but for another node
+                raise Rejected("misdirected", sender)
         except Rejected as rej:
             self._reject(arrival, rej.reason, rej.sender, len(frame))
             return

@@ -11,6 +11,11 @@ shared by all nodes. The mission key comes from the ``SWARMBOX_NET_KEY`` environ
 mission, topology, timing, algorithm and, for an agent, a backend flying its one vehicle — then
 ticks on its own wall clock, writes its logs under ``RUN/logs/<node>/`` and its outcome and
 resource use to ``RUN/nodes/<node>.json``. SIGTERM or SIGINT ends it cleanly (logs closed).
+
+Every process of a node counts its boot in ``nodes/<node>.boots``: the count is the node's
+*incarnation*, carried in its message ids, reliable tasks and acknowledgements, so that a node started
+again (after ``kill -9``, say) is never taken for its earlier process. A restarted ground adopts the
+swarm's stage from the drones' Reports (``GroundNode.rejoin``).
 """
 
 from __future__ import annotations
@@ -66,6 +71,20 @@ def mission_key(cfg: DictConfig) -> bytes:
     return str(key).encode()
 
 
+def next_incarnation(run_dir: Path, name: str) -> int:
+    """This process's boot count for node ``name`` in the run (0 for the first), counted on disk."""
+    path = run_dir / "nodes" / f"{name}.boots"
+    try:
+        boots = int(path.read_text())
+    except FileNotFoundError:
+        boots = 0
+    except ValueError as exc:
+        raise NodeSetupError(f"{path} holds no boot count: {exc}") from None
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_atomic(path, str(boots + 1))
+    return boots
+
+
 def heartbeat_subscribers(topo_superiors: dict[int, int], peers: str) -> dict[int, list[int]]:
     """Who hears whose Heartbeats at the start: inferiors their superior, and peers each other."""
     subs: dict[int, list[int]] = {}
@@ -85,6 +104,7 @@ class NodeProcess:
         self.name = node_name(node_id)
         self.stop_requested = ""
         self.rejected: dict[str, int] = {}
+        self.incarnation = next_incarnation(run_dir, self.name)
         seed = int(cfg.seed)
         m = self.mission = mission.load(cfg, build.rng_for(seed, "dataset"))
         if node_id != GROUND_ID and node_id not in m.drone_ids:
@@ -119,7 +139,7 @@ class NodeProcess:
         common = dict(time=self.time, clock=self.clock, net=self.medium, inbox=inbox, log=log,
                       timing=self.timing, mission=m.info(),
                       params=typed_params(cfg.algo),
-                      rng=build.rng_for(seed, f"algo/{self.name}"))
+                      rng=build.rng_for(seed, f"algo/{self.name}"), incarnation=self.incarnation)
         self.backend = None
         if os.environ.get("SWARMBOX_MAVLINK_KEY"):   # set by the launcher from backend.signing_key
             cfg.backend.signing_key = os.environ["SWARMBOX_MAVLINK_KEY"]   # MAVLink 2 signing of the link
@@ -170,7 +190,9 @@ class NodeProcess:
             self.time.tick = max(0, math.ceil(now_s / self.timing.tick_s))
             self.time.t_s = now_s
             self.node.event("topology", "process_restarted", self.node_id, tick=self.time.tick,
-                            earlier_segments=len(self.segments))
+                            earlier_segments=len(self.segments), incarnation=self.incarnation)
+            if self.node_id == GROUND_ID:
+                self.node.rejoin()   # adopt the swarm's stage rather than command ICEBREAK
         return True
 
     def run(self) -> dict[str, Any]:
@@ -207,7 +229,7 @@ class NodeProcess:
             status, reason = "ok", ""
         out = {"node": self.name, "status": status, "reason": reason, "stage": node.stage.name,
                "ticks": self.time.tick, "sim_time_s": self.time.t_s, "restarted": self.restarted,
-               "tasks_refused": node.tasks_refused}
+               "incarnation": self.incarnation, "tasks_refused": node.tasks_refused}
         if self.node_id == GROUND_ID:
             out["lost_drones"] = sorted(i for i, inf in node.inferiors.items() if not inf.alive)
         return out

@@ -184,15 +184,23 @@ class NodeSet:
         return (any(p.poll() is None for p in self.procs.values())
                 or any(_alive(pid) for pid in self.restarts.values()))
 
+    def _ground_restarted(self) -> bool:
+        pid = self.restarts.get(GROUND_ID)
+        return pid is not None and _alive(pid)
+
     def wait_ground(self) -> None:
+        """Until the ground process ends, or the process that restarted it does."""
         ground = self.procs[GROUND_ID]
-        while ground.poll() is None:
+        while ground.poll() is None or self._ground_restarted():
             self.adopt_restarts()
             wall.sleep(POLL_S)
 
     def finish_agents(self, timeout_s: float) -> None:
         deadline = wall.monotonic() + timeout_s
         while self._running() and wall.monotonic() < deadline:
+            if self._ground_restarted():   # the ground was started again: the run goes on with it
+                self.wait_ground()
+                deadline = wall.monotonic() + timeout_s
             wall.sleep(POLL_S)
         self.stop()
 

@@ -119,3 +119,35 @@ def test_a_wrongly_signed_packet_cannot_block_the_real_senders_stream():
     assert len(list(dec.decode(real.command((1, 1), mc.CMD_ARM_DISARM, arm)))) == 1
     replay = real.command((1, 1), mc.CMD_ARM_DISARM, arm)
     assert len(list(dec.decode(replay))) == 1 and list(dec.decode(replay)) == []   # a replay still is one
+
+
+YEARS_AGO_S = time.time() - 3 * 365 * 86400
+
+
+def test_a_packet_signed_years_ago_is_refused_as_the_first_of_a_new_stream():
+    """Same key, right system id, real UDP: a packet recorded years ago and replayed to a freshly
+    started link is refused (the decoder meets new streams with the current signing time)."""
+    link = VehicleLink("udpin:127.0.0.1:0", 1, set(WANTED), signing_key=KEY)
+    dest = ("127.0.0.1", link.endpoint.local_port)
+    old = vehicle(1, KEY)
+    old.signing.timestamp = signing_timestamp(YEARS_AGO_S)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        s.sendto(heartbeat(old), dest)
+        assert poll_all(link) == [] and link.bound is None
+        assert link.decoder.signature_rejected == 1
+        s.sendto(heartbeat(vehicle(1, KEY)), dest)                # signed now: accepted
+        assert len(poll_all(link)) == 1 and link.bound == s.getsockname()
+    link.close()
+
+
+def test_senders_stamp_with_the_wall_clock_so_a_restarted_receiver_accepts_them():
+    """pymavlink adds one per packet to the timestamp; a sender running for a while would fall minutes
+    behind and a restarted receiver would take its packets for replays. The encoder keeps it current."""
+    enc = mc.GcsEncoder(signing_key=KEY)
+    enc._mav.signing.timestamp = signing_timestamp(YEARS_AGO_S)   # as if it had run for years
+    packet = enc.command((1, 1), mc.CMD_ARM_DISARM, (1.0,))
+    stamp = int.from_bytes(packet[-12:-6], "little")
+    assert abs(stamp - signing_timestamp()) < 10**5                # within a second of now
+    fresh = mc.Decoder({mc.MSG["COMMAND_LONG"]}, KEY)
+    assert len(list(fresh.decode(packet))) == 1

@@ -102,6 +102,25 @@ def test_forged_unsigned_wrong_mission_and_stale_are_named():
     assert _reason(verifier, old) == "stale"
 
 
+def test_age_bound_is_two_sided_a_frame_dated_in_the_future_is_stale():
+    signer, verifier, wall = _pair()
+    wall.t += 5.0
+    ahead = signer.sign(b"from the future")                  # the sender's clock is 5 s ahead
+    wall.t -= 5.0
+    assert _reason(verifier, ahead) == "stale"
+    wall.t += 1.9                                            # within the bound (2 s) it is fine
+    assert verifier.open(signer.sign(b"slightly ahead"))[1] == b"slightly ahead"
+
+
+def test_tag_covers_the_key_expression():
+    signer, verifier, _ = _pair()
+    frame = signer.sign(b"for drone 3", "swarmbox/m1/to/3")
+    assert _reason(verifier, frame) == "forged" and verifier.open(frame, "swarmbox/m1/to/3")[0] == 3
+    moved = Verifier(AuthSpec(KEY, "m1", window=64), Wall())
+    with pytest.raises(Rejected, match="forged"):
+        moved.open(frame, "swarmbox/m1/to/5")                 # replayed on drone 5's key
+
+
 def test_restarted_sender_is_not_taken_for_a_replay():
     _, verifier, wall = _pair()
     spec = AuthSpec(KEY, "m1", window=64)

@@ -16,7 +16,7 @@ def test_task_code_1000_is_delivered_and_logged_with_its_wire_size(run):
     tasks = msgs[(msgs["type"] == "task") & (msgs["kind"] == "send")]
     assert len(tasks) >= 8
     # 1000 and 1001 take a two-byte varint: one byte more than a code below 128 would
-    base = 21 + 4 + 1 + 12 + 4 + 2 + 1 + 4      # header, seq, reliable, wp, yaw, len, stage, floor
+    base = 21 + 4 + 1 + 12 + 4 + 2 + 1 + 4 + 4  # header, seq, reliable, wp, yaw, len, stage, floor, inc.
     assert set(tasks["nbytes"]) == {base + 2 + 1}            # + varint + data "0"/"1"
     for i in range(4):
         got = table(d, f"drone_{i}", "messages")

@@ -9,7 +9,7 @@ import pytest
 import zenoh
 
 from swarmbox.core.clock import NodeClock, TimeSource
-from swarmbox.core.messages import Heartbeat, TaskAck
+from swarmbox.core.messages import Heartbeat, TaskAck, TaskCommand
 from swarmbox.core.rows import unpacking
 from swarmbox.net.auth import AuthSpec, Signer
 from swarmbox.net.codec import encode
@@ -98,9 +98,9 @@ def test_intruder_frames_are_dropped_with_their_reason(pair):
     try:
         key = f"swarmbox/{mission}/hb/-1"
         pub = intruder.declare_publisher(key)
-        genuine = Signer(AuthSpec(KEY, mission), -1).sign(encode(_heartbeat(500)))
-        forged = Signer(AuthSpec(b"x" * 32, mission), -1).sign(encode(_heartbeat(501)))
-        spoofed = Signer(AuthSpec(KEY, mission), 7).sign(encode(_heartbeat(502)))   # signer 7 claims src -1
+        genuine = Signer(AuthSpec(KEY, mission), -1).sign(encode(_heartbeat(500)), key)
+        forged = Signer(AuthSpec(b"x" * 32, mission), -1).sign(encode(_heartbeat(501)), key)
+        spoofed = Signer(AuthSpec(KEY, mission), 7).sign(encode(_heartbeat(502)), key)   # 7 claims src -1
         time.sleep(1.0)
         for frame in (encode(_heartbeat(503)), forged, spoofed, genuine, genuine):
             pub.put(frame)
@@ -109,3 +109,38 @@ def test_intruder_frames_are_dropped_with_their_reason(pair):
     finally:
         intruder.close()
     assert [m.msg_id for m in d.inbox] == [500]           # only the genuine frame, once
+
+
+def test_a_task_for_one_drone_replayed_to_another_is_refused():
+    """The ground's task for drone 3, captured on the wire and replayed to drone 5 within the age bound,
+    must not reach drone 5 (it was signed for drone 3's key expression); nor may a frame that a key
+    holder signed for drone 5's key but addressed inside to drone 3 (``misdirected``)."""
+    ports = free_ports(3)
+    locators = {i: f"tcp/127.0.0.1:{p}" for i, p in zip((-1, 3, 5), ports, strict=True)}
+    mission = f"t{ports[0]}"
+    (g, _, _), (d3, t3, _), (d5, t5, rows5) = (_node(i, locators, mission) for i in (-1, 3, 5))
+    port = free_ports(1)[0]
+    spy = zenoh.open(session_config(f"tcp/127.0.0.1:{port}", list(locators.values())))
+    captured: list[bytes] = []
+    sub = spy.declare_subscriber(f"swarmbox/{mission}/to/3",
+                                 lambda sample: captured.append(bytes(sample.payload.to_bytes())))
+    to_5 = spy.declare_publisher(f"swarmbox/{mission}/to/5")
+    try:
+        task = TaskCommand(77, 1.0, -1, 3, 1, True, 4, (1.0, 2.0, -3.0), None, "go", 2, 1, 0)
+        for _ in range(200):                                   # until the sessions are connected
+            g.send(task, 3)
+            if _pump(d3, t3, lambda: d3.inbox and captured, timeout_s=0.1):
+                break
+        assert d3.inbox[-1] == task and captured
+        to_5.put(captured[-1])                                # the genuine frame, replayed to drone 5
+        insider = Signer(AuthSpec(KEY, mission), -1).sign(encode(task._replace(msg_id=78)),
+                                                          f"swarmbox/{mission}/to/5")
+        to_5.put(insider)                                     # signed for drone 5, addressed to drone 3
+        assert _pump(d5, t5, lambda: len([r for r in rows5 if r[2] == "drop"]) >= 2)
+    finally:
+        sub.undeclare()
+        spy.close()
+        for m in (g, d3, d5):
+            m.close()
+    assert d5.inbox == []
+    assert sorted(r[9] for r in rows5 if r[2] == "drop") == ["forged", "misdirected"]

@@ -23,7 +23,7 @@ import zenoh
 from swarmbox.analysis.load import load_run
 from swarmbox.analysis.unify import unify
 from swarmbox.core.messages import Heartbeat, Report
-from swarmbox.net.auth import mission_tag
+from swarmbox.net.auth import VERSION, mission_tag
 from swarmbox.net.codec import encode
 from swarmbox.net.zenoh_medium import session_config
 from swarmbox.run.processes import free_ports
@@ -86,7 +86,8 @@ def intrude(plan: dict, stop: threading.Event) -> None:
     fake_abort = Heartbeat(2, 0.0, -1, -1, (), (0.0,) * 3, (0.0,) * 3)         # stage -1 = ABORT
     try:
         while not stop.wait(0.5):
-            head = b"SB\x01" + mission_tag(plan["mission_id"]) + struct.pack("<hQd", -1, 2**62, time.time())
+            head = b"SB" + bytes([VERSION]) + mission_tag(plan["mission_id"]) + struct.pack("<hQd", -1, 2**62,
+                                                                                       time.time())
             forged = head + encode(fake_abort) + bytes(16)    # right mission, fresh, but no key
             to_ground.put(encode(fake_report))         # unsigned
             ground_hb.put(encode(fake_abort))          # unsigned

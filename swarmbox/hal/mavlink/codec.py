@@ -26,7 +26,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from swarmbox.api import FlightMode, Setpoint, SetpointKind
 from swarmbox.hal.mavlink.paramset import param_from_wire, param_to_wire
-from swarmbox.hal.mavlink.signing import signing_timestamp
+from swarmbox.hal.mavlink.signing import keep_current, signing_timestamp
 
 Vec3 = tuple[float, float, float]
 MAVError = mavlink.MAVError
@@ -327,6 +327,7 @@ class Decoder:
         if signing_key is not None:
             self._mav.signing.secret_key = signing_key   # pymavlink then rejects unsigned packets
             self._stamps = self._mav.signing.stream_timestamps
+            keep_current(self._mav.signing)   # a new stream stamped > 1 min before now is refused
         self.packets = self.decoded = self.skipped = self.bad_packets = self.garbage_bytes = 0
         self.signature_rejected = 0
         self.skipped_ids: dict[int, int] = {}
@@ -334,6 +335,8 @@ class Decoder:
     def decode(self, data: bytes) -> Iterator[tuple[Packet, Any]]:
         """Yield ``(packet, value)`` for every wanted, valid packet of ``data``."""
         wanted, mav = self.wanted, self._mav
+        if self._stamps is not None:
+            keep_current(mav.signing)
         for item in iter_packets(data):
             if isinstance(item, int):
                 self.garbage_bytes += item
@@ -383,6 +386,8 @@ class GcsEncoder:
             sign.timestamp = signing_timestamp()
 
     def _pack(self, msg: Any) -> bytes:
+        if self._mav.signing.sign_outgoing:
+            keep_current(self._mav.signing)
         buf = msg.pack(self._mav)
         self._mav.seq = (self._mav.seq + 1) % 256
         return bytes(buf)

@@ -18,7 +18,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from swarmbox.hal.mavlink.codec import MSG, PREARM_CHECK_BIT
 from swarmbox.hal.mavlink.frames import GeoFrame, deg_e7
-from swarmbox.hal.mavlink.signing import signing_timestamp
+from swarmbox.hal.mavlink.signing import keep_current, signing_timestamp
 from swarmbox.hal.mavlink.statustext import split
 
 Vec3 = tuple[float, float, float]
@@ -122,6 +122,8 @@ class VehicleEncoder:
                 for chunk, line_id, seq in split(text, self._text_id)]
 
     def _pack(self, msg: object) -> bytes:
+        if self._mav.signing.sign_outgoing:
+            keep_current(self._mav.signing)   # stamps follow the wall clock (a restarted link checks them)
         buf = msg.pack(self._mav)  # type: ignore[attr-defined]
         self._mav.seq = (self._mav.seq + 1) % 256
         return bytes(buf)

@@ -44,3 +44,11 @@ class SwarmBoxSweeper(BasicSweeper):
             return key in groups or (repo is not None and repo.group_exists(key))
 
         super().validate_batch_is_legal(jobs_to_check(batch, is_group))
+
+    def sweep(self, arguments: list[str]) -> Any:
+        """The basic sweep, with every key hidden from ``multirun.yaml`` and the console job list."""
+        from swarmbox.run.record import hide_in_config
+
+        assert self.config is not None
+        hide_in_config(self.config)   # the jobs compose from ``arguments``, which keep their keys
+        return super().sweep(arguments)

@@ -6,12 +6,15 @@
       callbacks:
         analyze:
           _target_: swarmbox.analysis.callback.AnalyzeSweepCallback
-          group_by: [algo]
+          group_by: null        # the compared factor; null: algo if it varies, else every swept key
+          tasks: null           # aggregates across tasks (e.g. [seed]: a dataset per seed); null: the strata
 
 Hydra builds its callbacks in the process that then runs the jobs, so this module imports the
 analysis library (pandas, matplotlib) only in ``on_multirun_end``: runs never load it, and the runtime
 (``swarmbox.run``) never imports ``swarmbox.analysis``.
-The callback never raises: an analysis error is logged and the multirun's own result stands.
+The callback never raises: an analysis error is logged and the multirun's own result stands (its exit
+code is the jobs', docs/errors.md); a sweep with no ok run still gets its tables (run counts) and a
+warning, and groups that are not comparable are named in the log.
 """
 
 from __future__ import annotations
@@ -31,9 +34,12 @@ log = logging.getLogger(__name__)
 class AnalyzeSweepCallback(Callback):
     """Runs the sweep analysis on ``config.hydra.sweep.dir`` in ``on_multirun_end``."""
 
-    def __init__(self, group_by: Sequence[str] = ("algo",), n_boot: int = 2000, seed: int = 0,
-                 figures: bool = True, workers: int | None = None) -> None:
-        self.group_by, self.n_boot, self.seed = tuple(group_by), n_boot, seed
+    def __init__(self, group_by: Sequence[str] | None = None, n_boot: int = 2000, seed: int = 0,
+                 figures: bool = True, workers: int | None = None,
+                 tasks: Sequence[str] | None = None) -> None:
+        self.group_by = tuple(group_by) if group_by else None
+        self.tasks = tuple(tasks) if tasks else None
+        self.n_boot, self.seed = n_boot, seed
         self.figures, self.workers = figures, workers
 
     def _workers(self) -> int:
@@ -51,15 +57,22 @@ class AnalyzeSweepCallback(Callback):
         try:
             from swarmbox.analysis.outputs import write_sweep
             from swarmbox.analysis.parallel import Reporter
-            from swarmbox.analysis.sweep import SweepOptions, analyze_sweep
+            from swarmbox.analysis.sweep import SweepInputError, SweepOptions, analyze_sweep
 
-            options = SweepOptions(group_by=self.group_by, n_boot=self.n_boot, seed=self.seed)
+            options = SweepOptions(group_by=self.group_by, n_boot=self.n_boot, seed=self.seed,
+                                   tasks=self.tasks)
             sweep_dir = Path(str(config.hydra.sweep.dir))
-            result = analyze_sweep(sweep_dir, options, workers=self._workers(),
-                                   progress=Reporter("sweep analysis"))
+            try:
+                result = analyze_sweep(sweep_dir, options, workers=self._workers(),
+                                       progress=Reporter("sweep analysis"))
+            except SweepInputError as exc:
+                log.error("sweep analysis refused: %s", exc)
+                return
             write_sweep(result, sweep_dir, with_figures=self.figures)
             for row in result.problems.itertuples(index=False):
                 log.warning("%s: %s: %s", row.severity, row.run, row.problem)
+            if len(result.runs) and not result.ok_runs:
+                log.warning("no run ended ok: the sweep tables hold run counts and no metric")
             log.info("sweep analysis of %d runs written under %s", len(result.runs), sweep_dir)
         except Exception:  # noqa: BLE001 - an analysis failure must not fail the multirun
             log.exception("sweep analysis failed")

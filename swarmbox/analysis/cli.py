@@ -16,15 +16,17 @@ from swarmbox.analysis.compare import (
     has_regression,
     load_config,
     load_summary,
+    regressed,
 )
 from swarmbox.analysis.load import RunLoadError, find_runs, find_unfinished, load_run
 from swarmbox.analysis.outputs import metrics_table, write_run, write_sweep
 from swarmbox.analysis.parallel import Reporter
 from swarmbox.analysis.report import ANALYZED_COLUMNS, AnalysisOptions, RunAnalysis, analyze_run
-from swarmbox.analysis.sweep import SweepOptions, analyze_sweep, summary_wide
+from swarmbox.analysis.sweep import SweepInputError, SweepOptions, analyze_sweep, summary_wide
 from swarmbox.analysis.tables import to_markdown
 
-EXIT_OK, EXIT_REGRESSION, EXIT_BAD_INPUT, EXIT_INCOMPLETE = 0, 1, 2, 3
+#: 4 (a sweep): the tables were written but no run ended ok, so they hold run counts and no metric.
+EXIT_OK, EXIT_REGRESSION, EXIT_BAD_INPUT, EXIT_INCOMPLETE, EXIT_NO_OK_RUN = 0, 1, 2, 3, 4
 
 
 def _analyze_parser() -> argparse.ArgumentParser:
@@ -42,7 +44,12 @@ def _analyze_parser() -> argparse.ArgumentParser:
     run.add_argument("--fault-onset", type=float, help="fault onset, unified s (default: the fault event)")
     run.add_argument("--fault-target", type=int, help="fault target drone (default: from the fault event)")
     sweep = p.add_argument_group("sweep tables")
-    sweep.add_argument("--group-by", nargs="+", default=["algo"], help="choice column(s) to group by (algo)")
+    sweep.add_argument("--group-by", nargs="+",
+                       help="the compared factor: any choice or override key, e.g. algo or network.loss_prob "
+                            "(default: algo if it varies, else every swept key)")
+    sweep.add_argument("--tasks", nargs="+",
+                       help="what a task is for the aggregates across tasks (IQM, P(improvement), profiles): "
+                            "keys or seed (default: the other swept keys, e.g. mission)")
     sweep.add_argument("--pair", nargs=2, action="append", metavar=("A", "B"),
                        help="paired comparison B - A (repeatable; default: every pair of groups)")
     sweep.add_argument("--statuses", nargs="+", default=["ok"], help="run statuses summarized (ok)")
@@ -69,7 +76,11 @@ def _print_run(analysis: RunAnalysis) -> None:
     cols = [c for c in ("drone", "distance_h_m", "busy_s", "utilization", "idle_s", "latency_ms_mean",
                         "loss_ratio", "disc_h_m_max") if c in analysis.drones.columns]
     print(to_markdown(analysis.drones[cols]))
+    if len(analysis.finding):
+        print("finding (from the logs alone):")
+        print(to_markdown(analysis.finding))
     if len(analysis.diagnosis):
+        print(f"scoring against the fault onset ({analysis.onset.name if analysis.onset else 'given'}):")
         print(to_markdown(analysis.diagnosis[["metric", "t_f_s", "tau_d", "sigma_a", "drone", "is_target"]]))
     print(to_markdown(metrics_table(analysis)[["metric", "value", "unit"]]))
 
@@ -110,23 +121,34 @@ def analyze_main(argv: list[str] | None = None) -> int:
 
 
 def _analyze_sweep(path: Path, out: Path, args: argparse.Namespace) -> int:
-    opts = SweepOptions(group_by=tuple(args.group_by), statuses=tuple(args.statuses), n_boot=args.n_boot,
-                        ci=args.ci, seed=args.seed, pairs=tuple(map(tuple, args.pair)) if args.pair else None,
-                        run=_run_options(args))
-    result = analyze_sweep(path, opts, workers=args.workers, progress=Reporter("analysis"))
+    opts = SweepOptions(group_by=tuple(args.group_by) if args.group_by else None,
+                        statuses=tuple(args.statuses),
+                        n_boot=args.n_boot, ci=args.ci, seed=args.seed,
+                        pairs=tuple(map(tuple, args.pair)) if args.pair else None,
+                        tasks=tuple(args.tasks) if args.tasks else None, run=_run_options(args))
+    try:
+        result = analyze_sweep(path, opts, workers=args.workers, progress=Reporter("analysis"))
+    except SweepInputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     write_sweep(result, out, with_figures=not args.no_figures, metrics=args.metrics)
     for row in result.problems.itertuples(index=False):
         print(f"{row.severity}: {row.run}: {row.problem}")
     if args.per_run:
-        for rel in result.runs.get("run", []):
+        for rel in result.runs.loc[result.runs["status"] == "ok", "run"]:
             write_run(analyze_run(path / rel, opts.run), path / rel, with_figures=not args.no_figures)
     if result.summary.empty:
-        print("error: no run could be summarized", file=sys.stderr)
+        print("error: no run could be read", file=sys.stderr)
         return EXIT_BAD_INPUT
     skipped = int((result.problems["severity"] == "skipped").sum())
-    print(f"{len(result.runs)} runs analyzed, {skipped} skipped")
+    counts = result.runs["status"].value_counts().to_dict()
+    print(f"{len(result.runs)} runs ({', '.join(f'{v} {k}' for k, v in sorted(counts.items()))}), "
+          f"{skipped} skipped")
     print(to_markdown(summary_wide(result.summary, result.group_by)))
     print(f"tables and figures written under {out}")
+    if not result.ok_runs:
+        print("error: no run ended ok: the tables hold run counts and no metric", file=sys.stderr)
+        return EXIT_NO_OK_RUN
     return EXIT_OK
 
 
@@ -167,7 +189,7 @@ def compare_main(argv: list[str] | None = None) -> int:
     counts = verdicts["verdict"].value_counts().to_dict()
     print(", ".join(f"{k}: {v}" for k, v in sorted(counts.items())))
     if has_regression(verdicts):
-        print("REGRESSION")
+        print(f"REGRESSION: {', '.join(regressed(verdicts))}")
         return EXIT_REGRESSION
     print("OK")
     return EXIT_OK

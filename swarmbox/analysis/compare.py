@@ -4,13 +4,22 @@ Input: two CSV files as written by the analyzer, a sweep's ``tables/summary.csv`
 or a run's ``tables/metrics.csv`` (column ``value``). Rows are matched on ``metric`` plus every key
 column (any column that is not a statistic, e.g. ``algo``).
 
+Rows must overlap: two tables with no (keys, metric) row in common are not a baseline and its sweep,
+and are refused (exit 2), as are tables with different key columns.
+
+A sweep summary carries its run counts as rows (``runs_attempted``, ``runs_ok``, ``runs_aborted``,
+``runs_failed``, ``runs_interrupted``, ``success_rate``), compared exactly by default: a run lost, or
+one more aborted or failed, is a regression. A metric whose mean stands on fewer values than in the
+baseline (its ``n`` dropped) is ``fewer``, also a regression.
+
 Per row, with baseline b, current c and tolerance tol = max(atol, rtol * |b|) (atol alone when b is
-infinite): for a *lower is better* metric, c - b > tol is ``worse`` and b - c > tol ``better``; mirrored
+infinite; |b|, so a negative baseline gets the same band as a positive one): for a *lower is better*
+metric, c - b > tol is ``worse`` and b - c > tol ``better``; mirrored
 for *higher is better*; a metric without a direction is ``changed`` beyond its tolerance (a
 regression: nobody said a change of it is harmless) unless the tolerance file marks it
 ``informational``, then ``info``. A row present in the baseline but absent or NaN in the current
-table is ``missing`` / ``nan``. ``worse``, ``changed``, ``missing`` and ``nan`` are regressions
-(``missing`` can be allowed).
+table is ``missing`` / ``nan``. ``worse``, ``changed``, ``fewer``, ``missing`` and ``nan`` are
+regressions (``missing`` can be allowed).
 
 A baseline directory carries its own tolerances: without ``--config``, a ``tolerances.yaml`` next to
 the baseline CSV is used.
@@ -26,6 +35,8 @@ from the YAML, then the baseline's ``direction`` column, then the built-in catal
       my_metric_mean: {direction: higher}
       busy_s_mean: {informational: true}   # no direction: report a change, never fail on it
       real_time_factor: {rtol: 0.3}    # an entry without ``ignore`` compares a metric ignored by default
+      delivery_wait_s_mean: {mode: exact}        # rtol = atol = 0 (deterministic backends)
+      distance_h_m_mean: {mode: float-noise}     # rtol 1e-9, atol 1e-12: summation-order noise only
 """
 
 from __future__ import annotations
@@ -38,11 +49,14 @@ from typing import Any
 import pandas as pd
 import yaml
 
-from swarmbox.analysis.catalog import Direction, direction_of
+from swarmbox.analysis.catalog import RUN_COUNTS, Direction, direction_of
 
-STAT_COLUMNS = {"metric", "n", "mean", "value", "median", "std", "ci_low", "ci_high", "direction", "unit",
-                "note", "kind"}   # note, kind: the sweep summary's annotations (CI withheld, machine figure)
-REGRESSIONS = {"worse", "changed", "missing", "nan"}
+STAT_COLUMNS = {"metric", "n", "n_runs", "mean", "value", "median", "std", "ci_low", "ci_high", "direction",
+                "unit", "note", "kind"}   # note, kind: annotations (CI withheld, machine figure)
+REGRESSIONS = {"worse", "changed", "fewer", "missing", "nan"}
+NO_COMMON_ROW = "no (group, metric) in common — is this the baseline for this sweep?"
+#: ``mode`` of a tolerance entry: (rtol, atol) it stands for.
+MODES = {"exact": (0.0, 0.0), "float-noise": (1e-9, 1e-12)}
 #: Name of the tolerance file that travels with a baseline.
 BASELINE_TOLERANCES = "tolerances.yaml"
 
@@ -78,6 +92,8 @@ BUILTIN_TOLERANCES: dict[str, Tolerance] = {
     # machine-dependent: compared only when a tolerance file names them
     "real_time_factor": Tolerance(0.5, 0.0, ignore=True), "wall_time_s": Tolerance(ignore=True),
     "anomaly_t_f_s": Tolerance(0.0, 0.5),
+    # run counts: exact; fewer runs, fewer ok or more aborted/failed/interrupted is a regression
+    **{m: Tolerance(0.0, 0.0, d) for m, d in RUN_COUNTS.items()},
 }
 
 
@@ -109,9 +125,13 @@ def _direction(value: Any) -> Direction:
 def _tolerance(entry: Any, where: str, base: Tolerance | None = None) -> Tolerance:
     if not isinstance(entry, dict):
         raise CompareInputError(f"{where}: expected a mapping, got {entry!r}")
-    unknown = set(entry) - {"rtol", "atol", "direction", "ignore", "informational"}
+    unknown = set(entry) - {"rtol", "atol", "direction", "ignore", "informational", "mode"}
     if unknown:
         raise CompareInputError(f"{where}: unknown key(s) {sorted(unknown)}")
+    if "mode" in entry:
+        if entry["mode"] not in MODES or {"rtol", "atol"} & set(entry):
+            raise CompareInputError(f"{where}: mode must be one of {sorted(MODES)}, without rtol/atol")
+        entry = {**entry, **dict(zip(("rtol", "atol"), MODES[entry["mode"]], strict=True))}
     if entry.get("direction") not in (None, "lower", "higher"):
         raise CompareInputError(f"{where}: direction must be 'lower' or 'higher'")
     try:
@@ -188,13 +208,20 @@ def verdict(base: float, cur: float, tol: Tolerance) -> str:
 
 
 def compare(baseline: pd.DataFrame, current: pd.DataFrame, config: CompareConfig) -> pd.DataFrame:
-    """Verdict per (keys, metric): keys, metric, baseline, current, delta, tolerance, direction, verdict."""
+    """Verdict per (keys, metric): keys, metric, baseline, current, delta, tolerance, direction, verdict.
+
+    Raises :class:`CompareInputError` when the key columns differ or no row is in both tables.
+    """
     keys = key_columns(baseline)
     if set(keys) != set(key_columns(current)):
-        raise CompareInputError(f"key columns differ: baseline {keys}, current {key_columns(current)}")
-    base = baseline[[*keys, "metric", "value"] + (["direction"] if "direction" in baseline else [])]
-    merged = base.merge(current[[*keys, "metric", "value"]], on=[*keys, "metric"], how="outer",
+        raise CompareInputError(f"{NO_COMMON_ROW} (the baseline's groups are keyed by {keys}, the current "
+                                f"table's by {key_columns(current)})")
+    counts = ["n"] if "n" in baseline and "n" in current else []
+    base = baseline[[*keys, "metric", "value", *counts] + (["direction"] if "direction" in baseline else [])]
+    merged = base.merge(current[[*keys, "metric", "value", *counts]], on=[*keys, "metric"], how="outer",
                         suffixes=("_base", "_cur"), indicator=True)
+    if not (merged["_merge"] == "both").any():
+        raise CompareInputError(NO_COMMON_ROW)
     rows = []
     for row in merged.to_dict("records"):
         tol = config.tolerance(row["metric"], row.get("direction"))
@@ -205,11 +232,23 @@ def compare(baseline: pd.DataFrame, current: pd.DataFrame, config: CompareConfig
             result = "new"
         else:
             result = verdict(b, c, tol)
+            fewer = counts and row["n_cur"] < row["n_base"]   # the mean stands on fewer values
+            if fewer and result not in ("ignored", "worse", "changed", "nan"):
+                result = "fewer"
         allowed = max(tol.atol, tol.rtol * abs(b)) if math.isfinite(b) else tol.atol
         rows.append({**{k: row[k] for k in keys}, "metric": row["metric"], "baseline": b, "current": c,
                      "delta": c - b, "tolerance": allowed, "direction": tol.direction or "",
+                     **({"n_baseline": row["n_base"], "n_current": row["n_cur"]} if counts else {}),
                      "verdict": result})
     return pd.DataFrame(rows)
+
+
+def regressed(verdicts: pd.DataFrame) -> list[str]:
+    """Names of the metrics with a regression verdict, run counts first."""
+    names = verdicts.loc[verdicts["verdict"].isin(REGRESSIONS), "metric"] if len(verdicts) else []
+    unique = list(dict.fromkeys(names))
+    order = list(RUN_COUNTS)
+    return sorted(unique, key=lambda m: order.index(m) if m in RUN_COUNTS else len(order) + unique.index(m))
 
 
 def has_regression(verdicts: pd.DataFrame) -> bool:

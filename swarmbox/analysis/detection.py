@@ -16,14 +16,14 @@ import numpy as np
 import pandas as pd
 
 from swarmbox.analysis import diagnosis as dg
-from swarmbox.analysis import network, scoring
+from swarmbox.analysis import network, sampling, scoring
 from swarmbox.analysis.load import load_run
 from swarmbox.analysis.unify import T, unify
 
 #: The parameter that is each fault model's magnitude.
 MAGNITUDE = {"gps_drift": "rate_m_s", "gps_bias": "bias_ned_m", "gps_noise": "noise_scale",
              "latency": "latency_ms", "packet_loss": "loss_prob", "burst_loss": "p_enter_burst"}
-SETTING = ["detector", "rule", "threshold_scale", "persist_ticks"]
+SETTING = ["detector", "rule", "threshold_scale", "persist_s"]
 
 
 def magnitude(truth: scoring.Truth | None) -> float:
@@ -40,7 +40,7 @@ def baseline_alarms(resets: pd.DataFrame, series: dg.Series, opts: dg.DiagnosisO
     """Estimator resets as alarms, each with the drone's largest discrepancy component at that tick
     and its cross-swarm score (excess over the fence in IQRs, 0 inside): the same ruler as the analyzer's."""
     rows = []
-    ticks = dg.nearest_tick(resets[T], series.tick_s) if len(resets) else np.array([], dtype="int64")
+    ticks = dg.nearest_tick(resets[T], series.step_s) if len(resets) else np.array([], dtype="int64")
     for (t_u, drone), tick in zip(zip(resets[T], resets["drone"], strict=True), ticks, strict=True):
         i = int(np.searchsorted(series.ticks, tick))
         j = series.drones.index(int(drone))
@@ -76,20 +76,20 @@ def evaluate_run(run_dir: str | Path, settings: Sequence[dg.DiagnosisOptions],
             "target": truth.target if truth else None, "onset_u": truth.onset_u if truth else np.nan,
             "scan_s": span[1] - span[0]}
     if truth is not None and truth.name in ("latency", "packet_loss", "burst_loss"):
-        flow = network.message_flow(run.tables["messages"])
+        flow = network.message_flow(run.tables["messages"], max_latency_s=sampling.max_latency_s(run))
         base["measured"] = scoring.measured_excess(flow, run.drones, truth)
     rows = []
     for opts in settings:
         alarms = dg.scan(series, opts)
         first = dg.finding(alarms)
         rows.append({**base, "detector": "swarmbox", "rule": opts.rule,
-                     "threshold_scale": opts.threshold_scale, "persist_ticks": opts.persist_ticks,
+                     "threshold_scale": opts.threshold_scale, "persist_s": opts.persist_s,
                      "alarms": len(alarms),
                      "first_alarm_drone": first.get("drone"), "first_alarm_metric": first.get("metric"),
                      **scoring.score_alarms(alarms, truth, span, n, grace_s)})
     resets = baseline_alarms(dg.estimator_alarms(run, span), series, settings[0])
     rows.append({**base, "detector": "baseline", "rule": "estimator_reset", "threshold_scale": 1.0,
-                 "persist_ticks": 1, "alarms": len(resets),
+                 "persist_s": 0.0, "alarms": len(resets),
                  "first_alarm_drone": int(resets["drone"].iloc[0]) if len(resets) else None,
                  "first_alarm_metric": "estimator_reset" if len(resets) else None,
                  **scoring.score_alarms(resets, truth, span, n, grace_s)})
@@ -138,7 +138,7 @@ def smallest_detected(det: pd.DataFrame, fa: pd.DataFrame, min_rate: float = 0.9
     out = []
     for key, g in merged.groupby(["detector", *by, "fault"], sort=True):
         best = None
-        for _, s in g.groupby(["rule", "threshold_scale", "persist_ticks"], sort=True):
+        for _, s in g.groupby(["rule", "threshold_scale", "persist_s"], sort=True):
             good = s[s["detection_rate"] >= min_rate].sort_values("magnitude")
             mag = float(good["magnitude"].iloc[0]) if len(good) else np.inf
             cand = (mag, -s["detection_rate"].mean(), s.iloc[0]["threshold_scale"], s, good)

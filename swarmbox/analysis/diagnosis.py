@@ -2,10 +2,14 @@
 metric, and since when. Nothing here reads the injected faults; :mod:`.scoring` compares the answer
 with the ground truth afterwards.
 
-Series (:func:`drone_series`). Every monitored metric is put on the run's tick grid. A sample at
-unified time t belongs to the *nearest* tick, round(t / tick): the clock offsets :func:`unify`
-estimates are off by microseconds even when no offset is injected, so a floor with a tiny epsilon
-would drop samples into the previous tick at random. Per drone and tick:
+Series (:func:`drone_series`). Every monitored metric is put on the run's sample grid: one step is
+the time a drone's state row stands for, tick length x ``run.state_every_ticks`` as logged
+(:mod:`.sampling`), so a run logged every 4th tick is scanned on a 4-tick grid instead of a grid
+where three cells in four are empty. A sample at unified time t belongs to the *nearest* grid point,
+round(t / step): the clock offsets :func:`unify` estimates are off by microseconds even when no
+offset is injected, so a floor with a tiny epsilon would drop samples into the previous cell at
+random. A series with fewer samples than its grid has points is reported (``Series.problems``): its
+persistence cannot be met as configured. Per drone and grid point:
 
 - ``disc_n_m``, ``disc_e_m``, ``disc_d_m``: GNSS - estimate, mean of the drone's state samples;
 - ``latency_ms``: mean latency of the delivered messages it sent or that were sent to it, by the
@@ -21,9 +25,10 @@ paper's section 5.3: the "statistical norm" is the rest of the swarm at that tic
 - ``rule="paper"``: the reference's detector, fences at 2.5 IQR, upper tail only, v > the same
   thresholds (absolute);
 - score = distance beyond the crossed fence in IQRs (+inf when IQR = 0);
-- a (drone, metric) is *in alarm* once flagged on ``persist_ticks`` consecutive ticks; an alarm
-  episode starts at the tick the persistence is reached (the first moment it is known) and lasts
-  while the flags continue. Its value and score are those of that tick.
+- a (drone, metric) is *in alarm* once flagged for ``persist_s`` (0.1 s): on
+  ceil(persist_s / step) consecutive grid points, at least one; an alarm episode starts at the point
+  the persistence is reached (the first moment it is known) and lasts while the flags continue. Its
+  value and score are those of that point.
 
 The scan covers the ground's EXECUTION stage (take-off and landing are manoeuvres every drone makes
 at different times, not a norm to compare against). The diagnosis of a run (:func:`finding`) is its
@@ -41,7 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from swarmbox.analysis import metrics, network
+from swarmbox.analysis import metrics, network, sampling
 from swarmbox.analysis.load import GROUND, RunData
 from swarmbox.analysis.unify import T
 
@@ -53,15 +58,19 @@ MIN_DEVIATION = {"disc_n_m": 1.5, "disc_e_m": 1.5, "disc_d_m": 1.5, "latency_ms"
 RULES = {"tukey": 1.5, "paper": 2.5}
 ALARM_COLUMNS = [T, "metric", "drone", "value", "score", "median", "iqr", "end_u"]
 _IQR_EPS = 1e-12
+#: Grid step when a run says nothing of its tick (no run.json ``tick_s``, no config, no state rows).
+FALLBACK_STEP_S = 0.025
+#: Below this fraction of grid points with a sample (median drone), a series is reported as sparse.
+MIN_COVERAGE = 0.9
 
 
 @dataclass(frozen=True)
 class DiagnosisOptions:
-    tick_s: float = 0.025
+    step_s: float | None = None        # grid step, s; None: the run's state period (sampling.py)
     loss_window_s: float = 2.5
     rule: str = "tukey"
     threshold_scale: float = 1.0
-    persist_ticks: int = 4
+    persist_s: float = 0.1             # how long a flag must hold before it is an alarm
     min_n: int = 3
     min_deviation: Mapping[str, float] = field(default_factory=dict)   # overrides per metric
     stage: str = "EXECUTION"
@@ -69,39 +78,51 @@ class DiagnosisOptions:
     def __post_init__(self) -> None:
         if self.rule not in RULES:
             raise ValueError(f"rule {self.rule!r} is not one of {sorted(RULES)}")
-        if self.persist_ticks < 1 or self.tick_s <= 0 or self.loss_window_s < self.tick_s:
-            raise ValueError("persist_ticks >= 1, tick_s > 0 and loss_window_s >= tick_s are required")
+        if self.persist_s < 0 or self.loss_window_s <= 0 or (self.step_s is not None and self.step_s <= 0):
+            raise ValueError("persist_s >= 0, loss_window_s > 0 and step_s > 0 (or None) are required")
 
     def threshold(self, metric: str) -> float:
         return float({**MIN_DEVIATION, **self.min_deviation}[metric]) * self.threshold_scale
 
+    def persist_points(self, step_s: float) -> int:
+        """Consecutive flagged grid points of ``step_s`` that make ``persist_s``: at least one."""
+        return max(1, int(np.ceil(self.persist_s / step_s - 1e-9)))
+
 
 @dataclass
 class Series:
-    """Metric matrices on the tick grid: ``values[metric]`` has shape (len(ticks), len(drones))."""
+    """Metric matrices on the sample grid: ``values[metric]`` has shape (len(ticks), len(drones))."""
 
-    ticks: np.ndarray            # tick indices (t_u = tick * tick_s)
+    ticks: np.ndarray            # grid indices (t_u = index * step_s)
     drones: list[int]
     values: dict[str, np.ndarray]
-    tick_s: float
+    step_s: float
+    problems: list[str] = field(default_factory=list)   # e.g. a series sparser than its grid
 
     def times(self) -> np.ndarray:
-        return self.ticks * self.tick_s
+        return self.ticks * self.step_s
 
     def tidy(self) -> pd.DataFrame:
         """Long form: t_u, drone, metric, value (NaN cells dropped)."""
         parts = []
         for metric, mat in self.values.items():
             t, d = np.nonzero(np.isfinite(mat))
-            parts.append(pd.DataFrame({T: self.ticks[t] * self.tick_s, "drone": np.asarray(self.drones)[d],
+            parts.append(pd.DataFrame({T: self.ticks[t] * self.step_s, "drone": np.asarray(self.drones)[d],
                                        "metric": metric, "value": mat[t, d]}))
         if not parts:
             return pd.DataFrame(columns=[T, "drone", "metric", "value"])
         return pd.concat(parts, ignore_index=True)
 
 
-def nearest_tick(t_u: np.ndarray | pd.Series, tick_s: float) -> np.ndarray:
-    return np.rint(np.asarray(t_u, dtype="float64") / tick_s).astype("int64")
+def nearest_tick(t_u: np.ndarray | pd.Series, step_s: float) -> np.ndarray:
+    """Index of the nearest grid point of step ``step_s``."""
+    return np.rint(np.asarray(t_u, dtype="float64") / step_s).astype("int64")
+
+
+def grid_step(run: RunData, opts: DiagnosisOptions) -> float:
+    """The grid step: ``opts.step_s``, else the run's state period, else :data:`FALLBACK_STEP_S`."""
+    step = opts.step_s if opts.step_s is not None else sampling.state_period_s(run)
+    return float(step) if np.isfinite(step) and step > 0 else FALLBACK_STEP_S
 
 
 def scan_span(run: RunData, stage: str = "EXECUTION") -> tuple[float, float]:
@@ -134,33 +155,49 @@ def _matrix(frame: pd.DataFrame, col: str, ticks: np.ndarray, drones: list[int],
 
 def drone_series(run: RunData, opts: DiagnosisOptions | None = None,
                  span: tuple[float, float] | None = None) -> Series:
-    """Every monitored metric per drone and tick of the scan span (``run`` must be unified)."""
+    """Every monitored metric per drone and grid point of the scan span (``run`` must be unified)."""
     opts = opts or DiagnosisOptions()
+    step = grid_step(run, opts)
     start, end = span or scan_span(run, opts.stage)
-    ticks = np.arange(nearest_tick([start], opts.tick_s)[0], nearest_tick([end], opts.tick_s)[0] + 1)
+    ticks = np.arange(nearest_tick([start], step)[0], nearest_tick([end], step)[0] + 1)
     drones = list(run.drones)
     disc = metrics.discrepancy(run.tables["state"])
-    disc = disc[disc["node"].isin(drones)].assign(tick=nearest_tick(disc[T], opts.tick_s)).rename(
+    disc = disc[disc["node"].isin(drones)].assign(tick=nearest_tick(disc[T], step)).rename(
         columns={"node": "drone"})
     values = {m: _matrix(disc, m, ticks, drones) for m in DISC}
-    flow = network.touching(network.message_flow(run.tables["messages"], opts.tick_s),
+    flow = network.touching(network.message_flow(run.tables["messages"], sampling.tick_s(run),
+                                                 sampling.max_latency_s(run)),
                             ["t_send", "t_recv", "latency_ms", "delivered", "counted", "lost"])
     flow = flow[flow["agent"].isin(drones)].rename(columns={"agent": "drone"})
     got = flow[flow["delivered"]]
-    values["latency_ms"] = _matrix(got.assign(tick=nearest_tick(got["t_recv"], opts.tick_s)), "latency_ms",
+    values["latency_ms"] = _matrix(got.assign(tick=nearest_tick(got["t_recv"], step)), "latency_ms",
                                    ticks, drones)
-    values["loss_ratio"] = _loss(flow, ticks, drones, opts)
-    return Series(ticks, drones, values, opts.tick_s)
+    values["loss_ratio"] = _loss(flow, ticks, drones, opts, step)
+    return Series(ticks, drones, values, step, _sparse(values[DISC[0]], step, opts))
 
 
-def _loss(flow: pd.DataFrame, ticks: np.ndarray, drones: list[int], opts: DiagnosisOptions) -> np.ndarray:
-    """Trailing-window loss ratio per tick: cumulative sums of lost and counted by send tick. A
+def _sparse(disc: np.ndarray, step: float, opts: DiagnosisOptions) -> list[str]:
+    """A warning when the median drone has a state sample at fewer than :data:`MIN_COVERAGE` of the
+    grid points: flags then have gaps, and ``persist_s`` is met late or never."""
+    if not disc.size:
+        return []
+    have = int(np.median(np.isfinite(disc).sum(axis=0)))
+    if have >= MIN_COVERAGE * len(disc):
+        return []
+    return [f"diagnosis: the state series has {have} samples per drone for {len(disc)} grid points of "
+            f"{step * 1e3:g} ms: a {opts.persist_s:g} s persistence may never be met "
+            "(grid finer than the log?)"]
+
+
+def _loss(flow: pd.DataFrame, ticks: np.ndarray, drones: list[int], opts: DiagnosisOptions,
+          step: float) -> np.ndarray:
+    """Trailing-window loss ratio per grid point: cumulative sums of lost and counted by send point. A
     window is only full once the run has sent messages for its whole length: before that (the
     first seconds of a run) the ratio of a few dozen messages is noise, and is left out."""
-    width = int(round(opts.loss_window_s / opts.tick_s))
+    width = max(1, int(round(opts.loss_window_s / step)))
     lo = ticks[0] - width
     grid = np.arange(lo, ticks[-1] + 1)
-    counted = flow[flow["counted"]].assign(tick=lambda f: nearest_tick(f["t_send"], opts.tick_s))
+    counted = flow[flow["counted"]].assign(tick=lambda f: nearest_tick(f["t_send"], step))
     first = int(counted["tick"].min()) if len(counted) else int(ticks[-1]) + 1
     counted = counted[(counted["tick"] >= lo) & (counted["tick"] <= ticks[-1])]
     n = np.nan_to_num(_matrix(counted.assign(one=1.0), "one", grid, drones, "sum"))
@@ -240,11 +277,11 @@ def scan(series: Series, opts: DiagnosisOptions | None = None) -> pd.DataFrame:
         score, med, iqr = outlier_matrix(mat, opts.threshold(metric), opts.rule, opts.min_n)
         for j, drone in enumerate(series.drones):
             flagged = ~np.isnan(score[:, j])
-            for first, last in _episodes(flagged, opts.persist_ticks):
-                rows.append({T: series.ticks[first] * series.tick_s, "metric": metric, "drone": int(drone),
+            for first, last in _episodes(flagged, opts.persist_points(series.step_s)):
+                rows.append({T: series.ticks[first] * series.step_s, "metric": metric, "drone": int(drone),
                              "value": float(mat[first, j]), "score": float(score[first, j]),
                              "median": float(med[first]), "iqr": float(iqr[first]),
-                             "end_u": series.ticks[last] * series.tick_s})
+                             "end_u": series.ticks[last] * series.step_s})
     out = pd.DataFrame(rows, columns=ALARM_COLUMNS)
     return _ordered(out)
 

@@ -13,6 +13,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 from matplotlib.ticker import NullFormatter
 
+from swarmbox.analysis.catalog import FAULT_UNITS
 from swarmbox.analysis.diagnosis import Series
 from swarmbox.analysis.scoring import Truth
 from swarmbox.analysis.unify import T
@@ -70,29 +71,41 @@ def _grid(n: int) -> tuple[Figure, np.ndarray]:
     return fig, fig.subplots(rows, cols, squeeze=False).ravel()
 
 
+#: How each detector is drawn: colour and marker differ, so print and colour-blind readers tell them apart.
+DETECTOR_STYLE = {"swarmbox": ("tab:blue", "o", "swarm analyzer"),
+                  "baseline": ("tab:orange", "s", "per-drone baseline")}
+_LINES = ("-", "--", ":", "-.")
+DETECTION_TARGET = 0.9
+
+
 def detection_curves(det: pd.DataFrame, *, units: dict[str, str] | None = None) -> Figure:
-    """Detection rate against fault magnitude, one panel per fault; one line per swarm size and
-    network, solid for the swarm analyzer, dashed for the per-drone baseline."""
+    """Detection rate against fault magnitude, one panel per fault. Each detector has its own colour and
+    marker; each swarm size and network its own line style; the legend names both. The 90 % target is a
+    labelled line; the magnitude axis carries the fault's unit (``units``, default
+    :data:`~swarmbox.analysis.catalog.FAULT_UNITS`)."""
+    units = {**FAULT_UNITS, **(units or {})}
     faults = sorted(det["fault"].unique())
     fig, axes = _grid(len(faults))
     for ax, fault in zip(axes, faults, strict=False):
         part = det[det["fault"] == fault]
         for i, ((n, net), g) in enumerate(part.groupby(["n_drones", "network"], sort=True)):
-            for detector, style in (("swarmbox", "-"), ("baseline", "--")):
+            for detector, (colour, marker, name) in DETECTOR_STYLE.items():
                 d = g[g["detector"] == detector].sort_values("magnitude")
-                if len(d) and (detector == "swarmbox" or d["detection_rate"].gt(0).any()):
-                    ax.plot(d["magnitude"], d["detection_rate"], style, marker="osD^"[i % 4], ms=4,
-                            color=f"C{i}", alpha=0.8,
-                            label=f"{n} drones, {net}" + (" (baseline)" if detector == "baseline" else ""))
-        ax.axhline(0.9, color="0.5", lw=0.6, ls=":")
+                if len(d):
+                    ax.plot(d["magnitude"], d["detection_rate"], ls=_LINES[i % len(_LINES)], marker=marker,
+                            ms=4, color=colour, alpha=0.85, label=f"{name}, {n} drones, {net}")
+        ax.axhline(DETECTION_TARGET, color="0.4", lw=0.8, ls=":", label="90 % detection")
+        ax.annotate("90 %", (1.0, DETECTION_TARGET), xycoords=("axes fraction", "data"), ha="right",
+                    va="bottom", fontsize="x-small", color="0.3")
         ax.set_xscale("log")
         mags = sorted(part["magnitude"].dropna().unique())
         ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xticks(mags, [f"{m:g}" for m in mags])
         ax.set_ylim(-0.03, 1.03)
-        ax.set_title(fault)
-        ax.set_xlabel(f"magnitude ({(units or {}).get(fault, '')})")
-        ax.set_ylabel("detection rate")
+        ax.set_title(fault, wrap=True)
+        unit = units.get(fault, "")
+        ax.set_xlabel(f"magnitude [{unit}]" if unit else "magnitude")
+        ax.set_ylabel("detection rate (share of runs)")
         ax.legend(fontsize="x-small")
     for ax in axes[len(faults):]:
         ax.set_visible(False)

@@ -7,6 +7,7 @@ render with the Agg canvas whatever backend the caller has set, and nothing leak
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -50,67 +51,92 @@ def save(fig: Figure, directory: Path, name: str, formats: tuple[str, ...] = ("p
     return paths
 
 
-def label(metric: str) -> str:
-    """Axis label of a metric: its name (as in the tables) and its unit.
-
-    Built-in metrics have their unit in the catalog; a mission metric declared in ``algo.metrics``
-    gets it from its name's unit token (``formation_error_m_mean``: m, ``delivery_wait_s_max``: s).
-    """
-    unit = unit_of(metric) or next((u for u in ("ms", "m", "s") if u in metric.split("_")), "")
+def label(metric: str, units: dict[str, str] | None = None) -> str:
+    """Axis label of a metric: its name (as in the tables) and its unit, from the catalog or the
+    algorithm's declaration (``units``); nothing is guessed from the name, and a count has none."""
+    unit = unit_of(metric, units)
     return f"{metric} [{unit}]" if unit else metric
 
 
-def gaps(summary: pd.DataFrame, group_by: tuple[str, ...] = ("algo",),
-         metrics: list[str] | None = None, rel_tol: float = 1e-4) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(gap, mean) matrices group x metric: how far each group's mean is from the best group's.
+def gaps(summary: pd.DataFrame, group_by: tuple[str, ...] = ("algo",), metrics: list[str] | None = None,
+         rel_tol: float = 1e-4, strata: tuple[str, ...] = ()) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(gap, mean) matrices group x metric: how far each group's mean is from the best group's of its
+    stratum (``strata``: the summary columns groups are compared within, e.g. the mission).
 
-    gap = |mean - best mean| / largest |mean| of the metric, in [0, 1]; 0 is the best group (or a
-    tie within ``rel_tol``). Unlike min-max scaling, this stays meaningful with two groups: a 3 %
-    difference reads as 3 %, not as best vs worst. Only algorithm metrics with a direction are kept
-    (never machine figures such as wall time).
+    gap = |mean - best mean| / largest |mean| of the metric in the stratum, in [0, 1]; 0 is the best
+    group (or a tie within ``rel_tol``). Unlike min-max scaling, this stays meaningful with two groups: a 3 %
+    difference reads as 3 %, not as best vs worst. Only algorithm metrics with a direction are kept (never
+    machine figures or run counts), and only where a stratum holds two groups with values.
     """
-    data = summary[summary["direction"].isin(["lower", "higher"]) & ~summary["metric"].isin(MACHINE_METRICS)]
+    data = summary[summary["direction"].isin(["lower", "higher"]) & ~summary["metric"].isin(MACHINE_METRICS)
+                   & (summary.get("kind", "metric") != "runs")]
     if metrics is not None:
         data = data[data["metric"].isin(metrics)]
-    data = data.assign(group=data[list(group_by)].astype("str").agg("/".join, axis=1))
+    keys = [*group_by, *[s for s in strata if s not in group_by]]
+    data = data.assign(group=data[keys].astype("str").agg("/".join, axis=1) if keys else "all",
+                       stratum=data[list(strata)].astype("str").agg("/".join, axis=1) if strata else "all")
     means = data.pivot(index="group", columns="metric", values="mean").astype("float64")
     directions = data.drop_duplicates("metric").set_index("metric")["direction"].reindex(means.columns)
-    best = means.min().where(directions == "lower", means.max())
-    scale = np.maximum(means.abs().max(), 1e-12)
+    stratum = data.drop_duplicates("group").set_index("group")["stratum"].reindex(means.index)
+    by = means.groupby(stratum)
+    lower = np.broadcast_to((directions == "lower").to_numpy(), means.shape)
+    best = by.transform("min").where(lower, by.transform("max"))
+    scale = np.maximum(means.abs().groupby(stratum).transform("max"), 1e-12)
     gap = (means - best).abs() / scale
-    gap = gap.where(gap > rel_tol, 0.0).where(means.notna())
-    gap = gap.loc[:, means.notna().sum() >= 2]     # a metric only one group has: nothing to compare
+    enough = means.notna().groupby(stratum).transform("sum") >= 2   # one group alone: nothing to compare
+    gap = gap.where(gap > rel_tol, 0.0).where(means.notna() & enough)
+    gap = gap.loc[:, gap.notna().any()]
     means = means[gap.columns]
     order = [m for m in dict.fromkeys(data["metric"]) if m in means.columns]
     return gap[order], means[order]
 
 
+def _group_runs(summary: pd.DataFrame, keys: list[str]) -> dict[str, str]:
+    """Per group label: "ok/attempted" runs, from the summary's run counts."""
+    counts = summary[summary["metric"].isin(["runs_ok", "runs_attempted"])]
+    if counts.empty:
+        return {}
+    counts = counts.assign(group=counts[keys].astype("str").agg("/".join, axis=1) if keys else "all")
+    wide = counts.pivot_table(index="group", columns="metric", values="mean", aggfunc="first")
+    return {g: f"{int(r.runs_ok)}/{int(r.runs_attempted)} runs ok" for g, r in wide.iterrows()}
+
+
 def heatmap(summary: pd.DataFrame, *, group_by: tuple[str, ...] = ("algo",), metrics: list[str] | None = None,
+            strata: tuple[str, ...] = (), units: dict[str, str] | None = None,
             ax: Axes | None = None) -> Figure:
-    """Group x metric: each cell shows the group's mean; colour = gap to the best group (white = best).
+    """Group x metric: each cell shows the group's mean; colour = gap to the best group of its stratum
+    (white = best). Each group's runs ok / attempted under its name; a cell whose mean stands on fewer
+    values than the group's ok runs says on how many (n=).
 
     Metrics run down the rows (names stay readable), groups across the columns. The colour scale
     runs from 0 to the largest gap (at least 10 %), so small differences are not painted as large.
     """
-    gap, means = gaps(summary, group_by, metrics)
+    gap, means = gaps(summary, group_by, metrics, strata=strata)
     gap, means = gap.T, means.T
-    fig, ax = _axes(ax, (3.5 + 1.3 * max(len(gap.columns), 1), 1.5 + 0.45 * max(len(gap), 1)))
+    fig, ax = _axes(ax, (3.5 + 1.5 * max(len(gap.columns), 1), 1.8 + 0.45 * max(len(gap), 1)))
+    keys = [*group_by, *[s for s in strata if s not in group_by]]
     if gap.empty:
-        ax.text(0.5, 0.5, "no metric with a direction in two or more groups: nothing to compare",
+        ax.text(0.5, 0.5, "no metric with a direction in two or more groups of one stratum:\n"
+                "nothing to compare",
                 ha="center", va="center", wrap=True)
         ax.set_axis_off()
         return fig
-    cells = means.map(lambda v: "" if pd.isna(v) else f"{v:.3g}")
+    runs = _group_runs(summary, keys)
+    cells = _cells(summary, keys, means, {g: int(t.split("/")[0]) for g, t in runs.items()})
     vmax = float(np.clip(np.nanmax(gap.to_numpy(dtype="float64"), initial=0.0), 0.1, 1.0))
     sns.heatmap(100 * gap.astype("float64"), ax=ax, cmap="OrRd", vmin=0, vmax=100 * vmax,
                 annot=cells.to_numpy(), fmt="", linewidths=0.5, linecolor="white",
                 cbar_kws={"label": "gap to the best group (% of the largest mean)"})
-    ax.set_yticks(np.arange(len(gap)) + 0.5, [label(m) for m in gap.index], rotation=0)
-    ax.set_xlabel("/".join(group_by))
+    ax.set_yticks(np.arange(len(gap)) + 0.5, [label(m, units) for m in gap.index], rotation=0)
+    ax.set_xticks(np.arange(len(gap.columns)) + 0.5,
+                  [f"{g}\n({runs[g]})" if g in runs else g for g in gap.columns])
+    ax.set_xlabel("/".join(keys))
     ax.set_ylabel("")
     ax.tick_params(axis="x", labelrotation=30)
-    n = summary.groupby(list(group_by))["n"].max()
-    ax.set_title(f"Mean per {'/'.join(group_by)} (runs per group: {_n_range(n)}); white = best")
+    within = f"; compared within {'/'.join(strata)}" if strata else ""
+    values = summary.loc[summary["metric"].isin(means.index), "n"]
+    title = f"Mean per {'/'.join(keys)} (n per mean: {_n_range(values)}); white = best{within}"
+    ax.set_title(_wrapped(title, fig, 12.0))
     return fig
 
 
@@ -119,7 +145,22 @@ def _n_range(n: pd.Series) -> str:
     return f"{lo}" if lo == hi else f"{lo}-{hi}"
 
 
-def boxplot(runs: pd.DataFrame, *, metric: str, by: str = "algo", ax: Axes | None = None) -> Figure:
+def _cells(summary: pd.DataFrame, keys: list[str], means: pd.DataFrame, ok: dict[str, int]) -> pd.DataFrame:
+    """Cell texts (metric x group): the mean, and its n where it is below the group's ok runs."""
+    n = summary.assign(group=summary[keys].astype("str").agg("/".join, axis=1) if keys else "all")
+    n = n.pivot_table(index="metric", columns="group", values="n", aggfunc="first").reindex_like(means)
+    return pd.DataFrame([[_annot(means.iloc[i, j], n.iloc[i, j], ok.get(g))
+                          for j, g in enumerate(means.columns)] for i in range(len(means))])
+
+
+def _annot(mean: float, n: float, ok: int | None) -> str:
+    if pd.isna(mean):
+        return ""
+    return f"{mean:.3g}" if ok is None or n == ok else f"{mean:.3g}\n(n={int(n)})"
+
+
+def boxplot(runs: pd.DataFrame, *, metric: str, by: str = "algo", units: dict[str, str] | None = None,
+            ax: Axes | None = None) -> Figure:
     """One metric across seeds, one column per group: every run as a dot, the mean as a bar; a box
     (quartiles) only from 5 runs up, since quartiles of 2-4 points are not a distribution
     (paper Fig. 4, right)."""
@@ -142,12 +183,13 @@ def boxplot(runs: pd.DataFrame, *, metric: str, by: str = "algo", ax: Axes | Non
                       label="mean" if x == 0 else None)
     ax.set_xticks(positions, [f"{g}\n(n={v.size})" for g, v in zip(order, groups, strict=True)])
     ax.ticklabel_format(axis="y", useOffset=False)
-    ax.set_ylabel(label(metric))
+    ax.set_ylabel(label(metric, units))
     ax.set_title(metric, fontsize="medium")
     return fig
 
 
-def boxplots(runs: pd.DataFrame, *, metrics: list[str], by: str = "algo", ax: Axes | None = None) -> Figure:
+def boxplots(runs: pd.DataFrame, *, metrics: list[str], by: str = "algo", units: dict[str, str] | None = None,
+             ax: Axes | None = None) -> Figure:
     """A grid of :func:`boxplot` s, one per metric that varies (``ax`` is ignored: the grid needs its
     own figure). Metrics with the same value in every run get no panel; a footnote lists them."""
     varying, constant = [], []
@@ -159,7 +201,7 @@ def boxplots(runs: pd.DataFrame, *, metrics: list[str], by: str = "algo", ax: Ax
     fig = Figure(figsize=(3.8 * cols, 3.4 * rows + 0.6), layout="constrained")
     axes = fig.subplots(rows, cols, squeeze=False).ravel()
     for metric, axis in zip(varying, axes, strict=False):
-        boxplot(runs, metric=metric, by=by, ax=axis)
+        boxplot(runs, metric=metric, by=by, units=units, ax=axis)
     for axis in axes[len(varying):]:
         axis.set_visible(False)
     if varying:
@@ -168,9 +210,16 @@ def boxplots(runs: pd.DataFrame, *, metrics: list[str], by: str = "algo", ax: Ax
     if constant:
         same = ", ".join(f"{m} = {runs[m].dropna().iloc[0]:.3g}" if runs[m].notna().any() else f"{m}: no data"
                          for m in constant)
-        title += f"\nthe same in every run, not drawn: {same}"
-    fig.suptitle(title)
+        title += f". The same in every run, not drawn: {same}"
+    fig.suptitle(_wrapped(title, fig), fontsize="medium")
     return fig
+
+
+def _wrapped(text: str, fig: Figure, points: float = 10.0) -> str:
+    """``text`` broken into lines that fit the figure's width (about 0.55 em a character), so that a
+    title is never cut at the figure's edge."""
+    per_line = max(20, int(fig.get_figwidth() * 72 / (0.55 * points)) - 4)
+    return "\n".join(textwrap.wrap(text, per_line, break_long_words=True))
 
 
 def _track(rows: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, str]:

@@ -12,14 +12,17 @@ Per drone:
   complete streak (the first one, unless an ``exec_incomplete`` followed it); busy time =
   completion - EXECUTION start, clipped to [0, duration]; a drone that never completed is busy for the
   whole duration; utilization = busy / duration; idle = duration - busy;
-- discrepancy = GNSS - estimated position per state sample (N, E, D; horizontal = hypot(N, E)).
+- discrepancy = GNSS - estimated position per tick (N, E, D; horizontal = hypot(N, E)); a state row
+  logged every n-th tick stands for the n ticks from it, its estimate carried on by its velocity.
 
 Across drones: mean and population standard deviation (ddof 0) of the per-drone values.
 Safety and swarm metrics align drones on the run's global ``tick``:
 - separation at a tick = smallest 3-D distance over drone pairs (truth if every drone has it, else the
   estimate; nearest neighbours from a k-d tree, never an N x N matrix); ``min_separation_m`` its
-  minimum over the window; ``time_below_separation_s`` = ticks with separation < threshold x tick
-  length;
+  minimum over the window; ``time_below_separation_s`` = the time of the logged ticks with separation
+  < threshold, each standing for the ticks up to the next logged one (at most the state log's period,
+  ``run.state_every_ticks`` x tick length: a gap in the log is not time below), so logging every
+  n-th tick does not change it by more than one state period per crossing of the threshold;
 - order at a tick = |sum_i v_i| / sum_i |v_i| over the drones' estimated 3-D velocities (NaN when
   the swarm is at rest); ``order_mean`` its mean over the window;
 - collision and safety events are counted over the whole run: a collision matters whenever it happens.
@@ -190,13 +193,43 @@ def workload_summary(per_drone: pd.DataFrame, window: ExecWindow) -> dict[str, f
     return out
 
 
-def discrepancy(state: pd.DataFrame) -> pd.DataFrame:
-    """GNSS - estimate per state sample: columns node, tick, t_u, disc_n_m, disc_e_m, disc_d_m, disc_h_m."""
+def discrepancy(state: pd.DataFrame, every_ticks: int = 1, tick_s: float = 0.0) -> pd.DataFrame:
+    """GNSS - estimate per tick: columns node, tick, t_u, disc_n_m, disc_e_m, disc_d_m, disc_h_m.
+
+    A state row logged every ``every_ticks`` ticks of ``tick_s`` stands for the ticks up to the next
+    one: for each, the GNSS fix it holds minus its estimate carried on by its estimated velocity (what
+    the estimator does between fixes). Reading only the logged ticks instead aliases with the GNSS
+    rate (a 10 Hz fix logged at 20 Hz is seen just after each fix, when the gap is smallest) and biases
+    the mean and maximum low; with every tick logged this is the logged rows themselves.
+    """
+    if every_ticks <= 1 or not len(state) or not tick_s > 0:
+        return _discrepancy(state, state.index)
+    upto = _ticks_to_next(state, every_ticks)
+    parts = []
+    for j in range(every_ticks):
+        rows = state[upto > j] if j else state
+        ahead = {f"pos_{a}": rows[f"pos_{a}"] + rows[f"vel_{a}"] * (j * tick_s) for a in "ned"}
+        moved = rows.assign(**ahead, tick=rows["tick"] + j, **{T: rows[T] + j * tick_s})
+        parts.append(_discrepancy(moved, rows.index))
+    return pd.concat(parts, ignore_index=True).sort_values(["node", "tick"], kind="stable", ignore_index=True)
+
+
+def _ticks_to_next(state: pd.DataFrame, every_ticks: int) -> np.ndarray:
+    """Per row: ticks to the drone's next row, at most ``every_ticks`` (the last row: ``every_ticks``)."""
+    node, tick = state["node"].to_numpy(), state["tick"].to_numpy(dtype="float64")
+    order = np.lexsort((tick, node))
+    gap = np.full(len(state), float(every_ticks))
+    same = node[order][1:] == node[order][:-1]
+    gap[order[:-1][same]] = np.diff(tick[order])[same]
+    return np.minimum(gap, every_ticks)
+
+
+def _discrepancy(state: pd.DataFrame, index: pd.Index) -> pd.DataFrame:
     out = {c: state[c].to_numpy() for c in ("node", "tick", T)}
     for axis in "ned":
         out[f"disc_{axis}_m"] = state[f"gnss_{axis}"].to_numpy() - state[f"pos_{axis}"].to_numpy()
     out["disc_h_m"] = np.hypot(out["disc_n_m"], out["disc_e_m"])
-    return pd.DataFrame(out, index=state.index)
+    return pd.DataFrame(out, index=index)
 
 
 def _drone_slots(node: np.ndarray, drones: list[int]) -> np.ndarray:
@@ -328,13 +361,26 @@ def swarm_timeline(state: pd.DataFrame, drones: list[int]) -> pd.DataFrame:
                          "order": order.reindex(times.index).to_numpy()})
 
 
+def row_durations(ticks: np.ndarray, tick_s: float, every_ticks: int = 1) -> np.ndarray:
+    """Time each row of a per-tick timeline stands for: the ticks up to the next row, at most
+    ``every_ticks`` (the log's period; also the last row's), times ``tick_s``."""
+    ticks = np.asarray(ticks, dtype="float64")
+    if not len(ticks):
+        return np.zeros(0)
+    steps = np.diff(ticks, append=ticks[-1] + every_ticks)
+    return np.clip(steps, 0, every_ticks) * tick_s
+
+
 def swarm_summary(swarm: pd.DataFrame, events: pd.DataFrame, tick_s: float,
-                  threshold_m: float) -> dict[str, float]:
-    """Safety and order scalars over the ticks of ``swarm``; event counts over all of ``events``."""
+                  threshold_m: float, every_ticks: int = 1) -> dict[str, float]:
+    """Safety and order scalars over the ticks of ``swarm`` (state logged every ``every_ticks``
+    ticks of ``tick_s``); event counts over all of ``events``."""
     sep, order = swarm["separation_m"], swarm["order"]
+    below = (sep < threshold_m).to_numpy(dtype=bool)
     return {
         "min_separation_m": float(sep.min()) if sep.notna().any() else np.nan,
-        "time_below_separation_s": float((sep < threshold_m).sum() * tick_s),
+        "time_below_separation_s": float(row_durations(swarm["tick"].to_numpy(), tick_s,
+                                                       every_ticks)[below].sum()),
         "collision_events": float((events["kind"] == "collision").sum()),
         "safety_events": float((events["kind"] == "safety").sum()),
         "order_mean": float(order.mean()) if order.notna().any() else np.nan,

@@ -1,7 +1,11 @@
 """Network metrics from the messages tables, on the unified clock.
 
 Every message is followed from its ``send`` row (one per destination) to the destination's ``recv``
-row, matched on ``(msg_id, dst)`` with the receiving node as ``dst``. Definitions:
+row, matched on ``(msg_id, dst)`` with the receiving node as ``dst`` *and by time*: a receive belongs
+to the latest send of its key before it (up to 5 ms of clock-estimation error earlier), never to a
+later one, and only within the run's plausible latency bound. A node that restarts numbers its
+messages from 0 again: its second life's sends are not matched to its first life's receives, and one
+lost after the restart comes out lost. Definitions:
 
 - latency of a delivered message = unified receive time - unified send time (ms);
 - a send with no matching receive is *lost*, except when it was still *in flight* at the end of the
@@ -31,16 +35,17 @@ from swarmbox.analysis.unify import T
 _LAT = "latency_ms"
 
 
-def message_flow(messages: pd.DataFrame, tick_s: float = 0.0) -> pd.DataFrame:
+def message_flow(messages: pd.DataFrame, tick_s: float = 0.0, max_latency_s: float = np.inf) -> pd.DataFrame:
     """One row per (message, destination): send/receive times, latency, delivered / lost / in flight.
 
     ``tick_s``: a message is handled at the first tick after its arrival, so one more tick of
-    margin is given to messages at the end of the run. Columns: msg_id, type, src, dst, nbytes,
-    t_send, t_recv, drop_reason, latency_ms, delivered, counted, lost (type only when ``messages`` has
-    it); sorted by (t_send, msg_id, dst). Matched by sorted keys (:mod:`swarmbox.analysis.flow`): no join
-    of the whole table.
+    margin is given to messages at the end of the run. ``max_latency_s``: a receive later than this
+    after the send is not its receive (:func:`swarmbox.analysis.sampling.max_latency_s` gives a run's).
+    Columns: msg_id, type, src, dst, nbytes, t_send, t_recv, drop_reason, latency_ms, delivered,
+    counted, lost (type only when ``messages`` has it); sorted by (t_send, msg_id, dst). Matched by
+    sorted keys (:mod:`swarmbox.analysis.flow`): no join of the whole table.
     """
-    return flow.message_flow(messages, tick_s)
+    return flow.message_flow(messages, tick_s, max_latency_s)
 
 
 def between(flow: pd.DataFrame, t0: float, t1: float) -> pd.DataFrame:

@@ -1,7 +1,9 @@
 """Write the tables and figures of a run or a sweep (used by the CLI and the Hydra callback).
 
 Run: ``<run>/tables/`` holds metrics (long: metric, value, direction, unit), drones, links, agents,
-clocks, diagnosis, anomalies (every flag), timeline (per drone and window), swarm (per tick),
+clocks, finding (the onset-agnostic diagnosis: first alarm) and alarms (every alarm episode), scoring
+(only with a fault onset: t_f, tau_d, Sigma_a against it), anomalies (every flag), timeline (per drone
+and window), swarm (per tick),
 connectivity (per window), markers, problems; ``<run>/figures/`` holds trajectories,
 one timeline per monitored metric, and the communication graph (up to ``figures.MANY_DRONES``
 drones; larger swarms get density/summary figures instead of one line per drone).
@@ -17,8 +19,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from swarmbox.analysis import figures
-from swarmbox.analysis.catalog import direction_of, unit_of
+from swarmbox.analysis import aggregate_plots, figures
+from swarmbox.analysis.catalog import declared_units, direction_of, unit_of
 from swarmbox.analysis.report import RunAnalysis
 from swarmbox.analysis.sweep import SweepResult, summary_wide
 from swarmbox.analysis.tables import write_table
@@ -33,8 +35,9 @@ FIGURE_METRICS = ("mission_duration_s", "distance_h_m_mean", "distance_h_m_std",
 
 
 def metrics_table(analysis: RunAnalysis) -> pd.DataFrame:
+    units = declared_units(analysis.run.config)
     rows = [{"metric": k, "value": v, "direction": direction_of(k, analysis.directions) or "",
-             "unit": unit_of(k)} for k, v in analysis.scalars.items()]
+             "unit": unit_of(k, units)} for k, v in analysis.scalars.items()]
     return pd.DataFrame(rows, columns=["metric", "value", "direction", "unit"])
 
 
@@ -51,7 +54,9 @@ def write_run(analysis: RunAnalysis, out: Path, with_figures: bool = True) -> li
         ("links", analysis.links, True), ("agents", analysis.agents, True),
         ("clocks", analysis.clocks, True), ("swarm", analysis.swarm, False),
         ("connectivity", analysis.connectivity, False),
-        ("diagnosis", analysis.diagnosis, True), ("anomalies", analysis.flags, False),
+        ("finding", analysis.finding, True), ("alarms", analysis.alarms, False),
+        *((("scoring", analysis.diagnosis, True),) if len(analysis.diagnosis) else ()),
+        ("anomalies", analysis.flags, False),
         ("timeline", analysis.timeline, False), ("markers", analysis.markers, False),
         ("problems", problems_table(analysis.problems), False),
     ):
@@ -100,7 +105,11 @@ def figure_metrics(result: SweepResult, requested: list[str] | None = None) -> l
 
 def write_sweep(result: SweepResult, out: Path, with_figures: bool = True,
                 metrics: list[str] | None = None) -> list[Path]:
-    """Write the benchmark tables (and figures) of a sweep under ``out``."""
+    """Write the benchmark tables (and figures) of a sweep under ``out``.
+
+    Every table is written whatever the sweep holds: a sweep with no ok run still has its run counts,
+    and an empty comparison or ranking is a row saying why.
+    """
     tables = out / "tables"
     written = write_table(result.runs, tables, "runs", markdown=False)
     written += write_table(result.problems, tables, "problems", markdown=False)
@@ -110,6 +119,8 @@ def write_sweep(result: SweepResult, out: Path, with_figures: bool = True,
     written += write_table(summary_wide(result.summary, result.group_by), tables, "summary_wide")
     written += write_table(result.paired, tables, "paired")
     written += write_table(result.ranks, tables, "ranks")
+    if result.aggregates is not None:
+        written += _aggregate_outputs(result, out, with_figures, metrics)
     if with_figures:
         chosen = figure_metrics(result, metrics)
         try:
@@ -119,17 +130,36 @@ def write_sweep(result: SweepResult, out: Path, with_figures: bool = True,
     return written
 
 
+def _aggregate_outputs(result: SweepResult, out: Path, with_figures: bool,
+                       metrics: list[str] | None) -> list[Path]:
+    agg = result.aggregates
+    written = write_table(agg.iqm, out / "tables", "aggregate_iqm")
+    written += write_table(agg.improvement, out / "tables", "aggregate_improvement")
+    written += write_table(agg.profiles, out / "tables", "aggregate_profiles", markdown=False)
+    if with_figures and len(agg.iqm):
+        chosen = [m for m in figure_metrics(result, metrics) if (agg.iqm["metric"] == m).any()]
+        compared = "/".join(result.design.group_by) if result.design else "group"
+        fig = aggregate_plots.aggregates(agg.iqm, agg.profiles, metrics=chosen or None,
+                                         tasks="/".join(agg.tasks), units=result.units, compared=compared)
+        written += figures.save(fig, out / "figures", "aggregate")
+    return written
+
+
 def _sweep_figures(result: SweepResult, out: Path, chosen: list[str]) -> list[Path]:
     written: list[Path] = []
     if not chosen:
         return written
+    d = result.design
+    compared, strata = (d.group_by, d.strata) if d else (result.group_by, ())
     ok = result.runs[result.runs["status"] == "ok"]
-    written += figures.save(figures.heatmap(result.summary, group_by=result.group_by, metrics=chosen),
-                            out, "heatmap")
-    by = result.group_by[0] if len(result.group_by) == 1 else "group"
-    runs = ok if len(result.group_by) == 1 else ok.assign(
-        group=ok[list(result.group_by)].astype("str").agg("/".join, axis=1))
+    written += figures.save(figures.heatmap(result.summary, group_by=compared, strata=strata, metrics=chosen,
+                                            units=result.units), out, "heatmap")
+    keys = list(result.group_by)
+    by = keys[0] if len(keys) == 1 else "group"
+    runs = ok if len(keys) == 1 else ok.assign(
+        group=ok[keys].astype("str").agg("/".join, axis=1) if keys else "all")
     finite = [m for m in chosen if np.isfinite(runs[m].to_numpy(dtype="float64")).any()]
     if finite:
-        written += figures.save(figures.boxplots(runs, metrics=finite, by=by), out, "boxplots")
+        written += figures.save(figures.boxplots(runs, metrics=finite, by=by, units=result.units), out,
+                                "boxplots")
     return written

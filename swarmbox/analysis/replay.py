@@ -107,7 +107,7 @@ def build_replay(source: str | Path | RunData, *, t_from: float | None = None, t
     flow = network.message_flow(tables["messages"], tick_s)
     flow = flow[(flow["t_send"] >= t0) & (flow["t_send"] <= t1)]
     state = _clip(tables["state"], t0, t1)
-    metrics = drone_timeline(flow, discrepancy(state), drones, window_s)
+    metrics = drone_timeline(flow, discrepancy(state), drones, window_s, tick_s)
     return Replay(
         run_dir=run.path, name=run.path.name, start_epoch_ns=_start_epoch_ns(run.manifest),
         span=(t0, t1), drones=drones, state=state,

@@ -1,4 +1,11 @@
-"""One run, end to end: load -> unify -> metrics -> timeline -> anomalies -> diagnosis."""
+"""One run, end to end: load -> unify -> metrics -> timeline -> anomalies -> diagnosis.
+
+Two diagnoses, kept apart: the *finding* (:mod:`.diagnosis`: the first alarm of the onset-agnostic
+scan, drone, metric and time, with every alarm episode) is made for every run from its logs alone,
+fault events or not; the onset-based table (:func:`.anomaly.diagnose`: t_f, tau_d, Sigma_a against a
+fault onset) exists only when a truth does (a fault event, or an onset given), and is written as
+*scoring*: it grades against that truth, it does not find anything by itself.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +15,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from swarmbox.analysis import anomaly, metrics, mission, network
+from swarmbox.analysis import anomaly, metrics, mission, network, sampling
+from swarmbox.analysis import diagnosis as dg
 from swarmbox.analysis.catalog import Direction
 from swarmbox.analysis.load import RunData, load_run
 from swarmbox.analysis.timeline import drone_timeline
@@ -69,11 +77,14 @@ class RunAnalysis:
     swarm: pd.DataFrame
     connectivity: pd.DataFrame
     flags: pd.DataFrame
-    diagnosis: pd.DataFrame
+    diagnosis: pd.DataFrame   # onset-based scoring (empty without a fault onset)
     markers: pd.DataFrame
     onset: anomaly.FaultOnset | None
     scalars: dict[str, float]
     directions: dict[str, Direction]
+    #: the onset-agnostic finding: one row (detected, drone, metric, t_u, value, score, alarms)
+    finding: pd.DataFrame = field(default_factory=pd.DataFrame)
+    alarms: pd.DataFrame = field(default_factory=pd.DataFrame)   # every alarm episode of the scan
 
     @property
     def problems(self) -> list[str]:
@@ -94,14 +105,6 @@ def _last_time(run: RunData) -> float:
 def _first_time(run: RunData) -> float:
     starts = [float(np.nanmin(t)) for t in _unified_times(run)]
     return min(starts) if starts else np.nan
-
-
-def _tick_s(run: RunData) -> float:
-    if run.manifest.get("tick_s"):
-        return float(run.manifest["tick_s"])
-    ticks = run.tables["state"].drop_duplicates("tick").sort_values("tick")
-    steps = np.diff(ticks[T]) / np.maximum(np.diff(ticks["tick"]), 1)
-    return float(np.median(steps)) if len(steps) else np.nan
 
 
 def _manifest_scalars(manifest: dict) -> dict[str, float]:
@@ -136,8 +139,8 @@ def _scalars(run: RunData, window: metrics.ExecWindow | None, span: metrics.Exec
     out["tx_bytes_per_s_mean"] = float(tx.mean()) if len(tx) else np.nan
     out["discrepancy_h_m_mean"] = float(per_drone["disc_h_m_mean"].mean())
     out["discrepancy_h_m_max"] = float(per_drone["disc_h_m_max"].max())
-    out |= metrics.swarm_summary(metrics.within(swarm, span), run.tables["events"], _tick_s(run),
-                                 opts.separation_m)
+    out |= metrics.swarm_summary(metrics.within(swarm, span), run.tables["events"], sampling.tick_s(run),
+                                 opts.separation_m, sampling.state_every_ticks(run))
     conn = metrics.within(connectivity, span)["connectivity"]
     out["connectivity_mean"] = float(conn.mean()) if len(conn) else np.nan
     out["connectivity_min"] = float(conn.min()) if len(conn) else np.nan
@@ -153,16 +156,17 @@ def analyze_run(source: str | Path | RunData, opts: AnalysisOptions | None = Non
     if window is None:
         run.problems.append("the ground never entered EXECUTION: workload metrics are NaN")
     span = window or metrics.ExecWindow(_first_time(run), _last_time(run), False)
-    flow = network.message_flow(run.tables["messages"], _tick_s(run))
+    flow = network.message_flow(run.tables["messages"], sampling.tick_s(run), sampling.max_latency_s(run))
     exec_flow = network.between(flow, span.start, span.end)
     full = not opts.scalars_only
     links = network.link_stats(exec_flow, span.duration) if full else pd.DataFrame()
     agents = (network.agent_stats if full else network.agent_traffic)(exec_flow, span.duration)
-    disc = metrics.discrepancy(run.tables["state"])
+    disc = metrics.discrepancy(run.tables["state"], sampling.state_every_ticks(run), sampling.tick_s(run))
     per_drone = _drone_table(run, window, span, agents, disc)
     onset = _onset(run, opts)
     flagged = full or onset is not None   # the flags feed the scalars through the diagnosis only
-    timeline = drone_timeline(flow, disc, run.drones, opts.window_s) if flagged else pd.DataFrame()
+    timeline = (drone_timeline(flow, disc, run.drones, opts.window_s, sampling.tick_s(run)) if flagged
+                else pd.DataFrame())
     swarm = metrics.swarm_timeline(run.tables["state"], run.drones)
     connectivity = network.connectivity_timeline(flow, run.nodes, opts.graph_window_s)
     flags = anomaly.detect(timeline, opts.tests()) if flagged else pd.DataFrame()
@@ -173,8 +177,24 @@ def analyze_run(source: str | Path | RunData, opts: AnalysisOptions | None = Non
     mission_values, directions = mission.mission_metrics(run.tables["events"], specs, span.start)
     scalars |= mission_values
     markers = mission.marker_table(run.tables["events"], specs, span.start) if full else pd.DataFrame()
+    finding, alarms = _finding(run, window, opts) if full else (pd.DataFrame(), pd.DataFrame())
     return RunAnalysis(run, clocks, window, flow, links, agents, per_drone, timeline, swarm, connectivity,
-                       flags, diagnosis, markers, onset, scalars, directions)
+                       flags, diagnosis, markers, onset, scalars, directions, finding, alarms)
+
+
+def _finding(run: RunData, window: metrics.ExecWindow | None,
+             opts: AnalysisOptions) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The onset-agnostic diagnosis over the EXECUTION stage: its first alarm and every alarm episode,
+    with the run analysis' minimum deviations. No fault event is read."""
+    if window is None:
+        return pd.DataFrame([{"detected": False, "alarms": 0}]), pd.DataFrame(columns=dg.ALARM_COLUMNS)
+    scan = dg.DiagnosisOptions(min_deviation={k: v for k, v in opts.min_deviation.items() if k in dg.METRICS})
+    series = dg.drone_series(run, scan, (window.start, window.end))
+    run.problems.extend(series.problems)
+    alarms = dg.scan(series, scan)
+    first = {"detected": False, "drone": None, "metric": None, T: np.nan, "value": np.nan, "score": np.nan}
+    first |= dg.finding(alarms)
+    return pd.DataFrame([first | {"alarms": len(alarms), "grid_s": series.step_s}]), alarms
 
 
 def _onset(run: RunData, opts: AnalysisOptions) -> anomaly.FaultOnset | None:

@@ -4,8 +4,8 @@ The analyzer (:mod:`.diagnosis`) never sees the fault events; this module reads 
 alarms. Definitions (paper section 5.3, with the deliberate differences in brackets):
 
 - **t_f**: from the fault's onset to the target's first alarm while the fault is on. [The paper
-  counts to the first deviation of the metric; here an alarm needs ``persist_ticks`` consecutive
-  flagged ticks and is stamped at the tick the persistence is reached, so t_f includes that
+  counts to the first deviation of the metric; here an alarm needs its flags to hold for
+  ``persist_s`` and is stamped at the grid point the persistence is reached, so t_f includes that
   confirmation time but no window-length rounding.]
 - **tau_d**: the target's metric value at that alarm. **Sigma_a**: its score, the distance beyond
   the fence in IQRs of the swarm at that tick. [The paper's sentence reads as "the IQR"; its code,

@@ -1,61 +1,77 @@
 """Benchmark tables over a sweep (multirun) directory.
 
-- ``runs``: one row per analyzed run: ``run`` (path relative to the sweep), ``status``, ``seed``, the
-  config choices from ``run.json`` (``choices``; never parsed from directory names) and every scalar
-  metric. Failed runs, directories whose ``run.json`` is unreadable and runs missing a table the
-  metrics need are reported in ``problems`` and skipped. Runs are analyzed in parallel processes.
-- ``summary`` (long): per group (default: ``algo``) and metric, over the runs whose status is in
-  ``statuses`` (default ``ok``): n, mean, median, sample std, and a bootstrap CI of the mean from
-  :func:`scipy.stats.bootstrap` (BCa; percentile when BCa is undefined, e.g. for a constant metric;
-  ``n_boot`` resamples, level ``ci``). With fewer than ``MIN_N_CI`` (5) values no CI is given and
-  ``note`` says so: a bootstrap over 2-4 runs reports an interval it cannot support. Every (group,
-  metric) cell draws from its own ``numpy.random.Generator`` seeded with
-  ``SeedSequence([seed, crc32("group|metric")])``, so the numbers do not depend on the order or
-  number of other cells. NaN values are left out. ``kind`` is ``machine`` for figures of the
-  computer rather than the algorithm (wall time, real-time factor): reported, never compared.
-- ``paired``: for two groups a and b, runs paired on ``seed`` and every other choice (e.g. the
-  mission), only where such pairs exist; per algorithm metric: n pairs, mean of b - a with a
-  bootstrap CI, Wilcoxon signed-rank p-value (1.0 when every difference is 0) and which side is
-  better given the metric's direction (only when the CI excludes 0). Fewer than ``MIN_N_CI`` pairs:
-  no CI, no test, a note.
-- ``ranks``: per algorithm metric with a direction, groups ranked by mean (1 = best; means equal to
-  5 significant digits tie and share the lower rank), plus the mean rank. Machine figures are never
-  ranked.
+- ``runs``: one row per run with a readable ``run.json``: ``run`` (path relative to the sweep),
+  ``status``, ``seed``, its identity (the config choices and every other override from ``run.json``, see
+  :mod:`swarmbox.analysis.identity`; never parsed from directory names) and every scalar metric. Failed
+  and interrupted runs and runs whose logs are incomplete are listed without metrics (they count in the
+  denominators) and reported in ``problems``; unreadable ``run.json`` files and killed runs only there.
+  Runs are analyzed in parallel processes. Two runs with the same identity and seed are an error.
+- ``summary`` (long): per group (the compared factor, default ``algo``, plus every other key that varies:
+  the strata) its run counts (``runs_attempted``, ``runs_ok``, ``runs_aborted``, ``runs_failed``,
+  ``runs_interrupted``, ``success_rate`` with a Wilson interval), then per metric, over the runs whose
+  status is in ``statuses`` (default ``ok``): n, the group's runs (``n_runs``), mean, median, sample std
+  and a bootstrap CI of the mean (scipy BCa; none below ``MIN_N_CI`` = 5 values). Mission-window metrics
+  are never taken from a run that did not complete. ``kind``: ``runs``, ``metric`` or ``machine``
+  (figures of the computer: reported, never compared).
+- ``paired``: per stratum, every two groups of the compared factor, runs paired on seed and the rest of
+  their identity: n pairs, mean of b - a with a bootstrap CI, Wilcoxon signed-rank p-value, the better
+  side when the CI excludes 0. Groups that never share a stratum get one row saying why.
+- ``ranks``: per stratum and metric with a direction, groups ranked by mean, and the mean rank.
+Definitions and the reasons behind them: docs/analysis.md.
 """
 
 from __future__ import annotations
 
 import itertools
 import logging
-import warnings
-import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
-from scipy import stats
 
-from swarmbox.analysis.catalog import MACHINE_METRICS, Direction, direction_of, unit_of
-from swarmbox.analysis.load import RunLoadError, find_runs, find_unfinished, load_run
+from swarmbox.analysis import aggregate, groupstats
+from swarmbox.analysis.catalog import MACHINE_METRICS, Direction, declared_units
+from swarmbox.analysis.groupstats import (  # noqa: F401 - the sweep API re-exports them
+    MIN_N_CI,
+    bootstrap_ci,
+    ci_note,
+    summary_wide,
+)
+from swarmbox.analysis.groupstats import rng as _rng  # noqa: F401
+from swarmbox.analysis.identity import (
+    DEFAULT,
+    Design,
+    SweepInputError,
+    check_unique,
+    comparable_pairs,
+    design,
+    labels,
+    not_comparable,
+    run_identity,
+)
+from swarmbox.analysis.load import RunLoadError, find_runs, find_unfinished, load_run, read_manifest
 from swarmbox.analysis.parallel import map_runs
 from swarmbox.analysis.report import SCALAR_COLUMNS, AnalysisOptions, analyze_run
 
 log = logging.getLogger(__name__)
 
 ID_COLUMNS = ("run", "status", "seed")
-MIN_N_CI = 5   # fewer values (or pairs): no bootstrap CI, no test
+__all__ = ["MACHINE_METRICS", "MIN_N_CI", "SweepInputError", "SweepOptions", "SweepResult", "analyze_sweep",
+           "bootstrap_ci", "ci_note", "summary_wide"]
 
 
 @dataclass(frozen=True)
 class SweepOptions:
-    group_by: tuple[str, ...] = ("algo",)
+    group_by: tuple[str, ...] | None = None   # None: algo if it varies, else every swept key
     statuses: tuple[str, ...] = ("ok",)
     n_boot: int = 2000
     ci: float = 0.95
     seed: int = 0
     pairs: tuple[tuple[str, str], ...] | None = None   # None: every pair of groups
+    #: what a task is for the aggregates across tasks (IQM, P(improvement), profiles): identity keys or
+    #: "seed" (a dataset per seed, as in RQ4); None: the strata (e.g. the mission), when there are any
+    tasks: tuple[str, ...] | None = None
     run: AnalysisOptions = field(default_factory=AnalysisOptions)
 
 
@@ -67,26 +83,38 @@ class SweepResult:
     paired: pd.DataFrame
     ranks: pd.DataFrame
     directions: dict[str, Direction]
-    choice_columns: list[str]
-    group_by: tuple[str, ...]
+    choice_columns: list[str]   # the identity columns
+    group_by: tuple[str, ...]   # the summary's key columns: compared factor, then strata
+    design: Design | None = None
+    units: dict[str, str] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)   # groups that are not comparable, and why
+    aggregates: Aggregates | None = None                # across tasks, when a sweep has several
 
     def metric_columns(self) -> list[str]:
         return metric_columns(self.runs, self.choice_columns)
 
+    @property
+    def ok_runs(self) -> int:
+        return int((self.runs["status"] == "ok").sum()) if "status" in self.runs else 0
+
 
 def _analyze_one(run_dir: Path, root: Path, opts: AnalysisOptions) -> dict:
-    """One run's table row, problems, declared directions and choice names (runs in a worker).
+    """One run's table row, problems, declared directions and units, and identity keys (in a worker).
 
-    Only the scalars are read, so the columns that feed none are not loaded (``SCALAR_COLUMNS``) and the
-    tables that feed none are not computed (``scalars_only``).
+    Every run with a readable ``run.json`` gets a row (a run that is not analyzed still counts in its
+    group's denominators). Only the scalars are read, so the columns that feed none are not loaded
+    (``SCALAR_COLUMNS``) and the tables that feed none are not computed (``scalars_only``).
     """
     rel = str(run_dir.relative_to(root)) if run_dir != root else "."
-    out: dict = {"row": None, "problems": [], "directions": {}, "choices": []}
+    out: dict = {"row": None, "problems": [], "directions": {}, "units": {}, "identity": []}
     try:
         run = load_run(run_dir, SCALAR_COLUMNS)
     except RunLoadError as exc:
         out["problems"].append({"run": rel, "severity": "skipped", "problem": str(exc)})
         return out
+    identity = run_identity(run.manifest)
+    out.update(identity=list(identity), units=declared_units(run.config),
+               row={"run": rel, "status": run.status, "seed": run.manifest.get("seed"), **identity})
     notes = [{"run": rel, "severity": "warning", "problem": p} for p in run.problems]
     skip = _skip_reason(run)
     if skip:
@@ -99,21 +127,20 @@ def _analyze_one(run_dir: Path, root: Path, opts: AnalysisOptions) -> dict:
         out["problems"].append({"run": rel, "severity": "skipped", "problem": f"analysis failed: {exc!r}"})
         return out
     out["problems"] += [{"run": rel, "severity": "warning", "problem": p} for p in analysis.problems]
-    run_choices = {str(k): str(v) for k, v in (run.manifest.get("choices") or {}).items()}
-    out.update(choices=list(run_choices), directions=dict(analysis.directions),
-               row={"run": rel, "status": run.status, "seed": run.manifest.get("seed"),
-                    **run_choices, **analysis.scalars})
+    out["directions"] = dict(analysis.directions)
+    out["row"] |= analysis.scalars
     return out
 
 
 def collect_runs(root: Path, opts: AnalysisOptions, workers: int | None = None,
                  progress: Callable[[int, int], None] | None = None,
-                 ) -> tuple[pd.DataFrame, pd.DataFrame, dict, list[str]]:
+                 ) -> tuple[pd.DataFrame, pd.DataFrame, dict, list[str], dict[str, str]]:
     """Analyze every run below ``root`` (in parallel: ``workers`` processes, default one per core).
 
-    Returns (runs table, problems table, declared directions, choice columns), in the runs' order.
+    Returns (runs table, problems table, declared directions, identity columns, declared units), in
+    the runs' order. Identity columns a run did not set hold :data:`~swarmbox.analysis.identity.DEFAULT`.
     """
-    rows, problems, directions, choices = [], [], {}, []
+    rows, problems, directions, identity, units = [], [], {}, [], {}
     for run_dir in find_unfinished(root):
         rel = str(run_dir.relative_to(root)) if run_dir != root else "."
         problems.append({"run": rel, "severity": "skipped",
@@ -121,11 +148,14 @@ def collect_runs(root: Path, opts: AnalysisOptions, workers: int | None = None,
     for one in map_runs(_analyze_one, find_runs(root), root, opts, workers=workers, progress=progress):
         problems += one["problems"]
         directions |= one["directions"]
-        choices += [c for c in one["choices"] if c not in choices]
+        units |= one["units"]
+        identity += [c for c in one["identity"] if c not in identity]
         if one["row"] is not None:
             rows.append(one["row"])
     runs = pd.DataFrame(rows)
-    return runs, pd.DataFrame(problems, columns=["run", "severity", "problem"]), directions, choices
+    for col in identity:
+        runs[col] = runs[col].astype("object").where(runs[col].notna(), DEFAULT).astype("str")
+    return runs, pd.DataFrame(problems, columns=["run", "severity", "problem"]), directions, identity, units
 
 
 def _skip_reason(run) -> str:
@@ -141,191 +171,96 @@ def metric_columns(runs: pd.DataFrame, choice_columns: list[str]) -> list[str]:
     return [c for c in runs.columns if c not in skip and pd.api.types.is_numeric_dtype(runs[c])]
 
 
-def _rng(seed: int, *key: str) -> np.random.Generator:
-    return np.random.default_rng(np.random.SeedSequence([seed, zlib.crc32("|".join(key).encode())]))
-
-
-def bootstrap_ci(values: np.ndarray, rng: np.random.Generator, n_boot: int,
-                 level: float) -> tuple[float, float]:
-    """Bootstrap CI of the mean (scipy, BCa; percentile where BCa is undefined); NaN below MIN_N_CI."""
-    values = np.asarray(values, dtype="float64")
-    if values.size < MIN_N_CI:
-        return np.nan, np.nan
-    if np.all(values == values[0]):
-        return float(values[0]), float(values[0])      # every resample has this mean
-    for method in ("BCa", "percentile"):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")            # BCa's degenerate-distribution warning
-            res = stats.bootstrap((values,), np.mean, n_resamples=n_boot, confidence_level=level,
-                                  method=method, vectorized=True, random_state=rng)
-        lo, hi = res.confidence_interval
-        if np.isfinite(lo) and np.isfinite(hi):
-            return float(lo), float(hi)
-    return np.nan, np.nan
-
-
-def ci_note(n: int) -> str:
-    return f"n={n} < {MIN_N_CI}: no CI" if 0 < n < MIN_N_CI else ("no values" if n == 0 else "")
-
-
-def _label(key: object) -> str:
-    return "/".join(str(k) for k in key) if isinstance(key, tuple) else str(key)
-
-
-def _finite(series: pd.Series) -> np.ndarray:
-    arr = series.to_numpy(dtype="float64")
-    return arr[np.isfinite(arr)]
-
-
-def summarize(runs: pd.DataFrame, metrics: list[str], opts: SweepOptions,
-              directions: dict[str, Direction]) -> pd.DataFrame:
-    """Long summary table: group columns, metric, n, mean, median, std, ci_low, ci_high, direction, unit."""
-    chosen = runs[runs["status"].isin(opts.statuses)] if len(runs) else runs
-    rows = []
-    if chosen.empty:
-        return pd.DataFrame(columns=[*opts.group_by, "metric", "n", "mean", "ci_low", "ci_high"])
-    for key, group in chosen.groupby(list(opts.group_by), sort=True, dropna=False):
-        keys = dict(zip(opts.group_by, key if isinstance(key, tuple) else (key,), strict=True))
-        for metric in metrics:
-            values = _finite(group[metric])
-            lo, hi = bootstrap_ci(values, _rng(opts.seed, _label(key), metric), opts.n_boot, opts.ci)
-            machine = metric in MACHINE_METRICS
-            rows.append({**keys, "metric": metric, "n": int(values.size),
-                         "mean": float(values.mean()) if values.size else np.nan,
-                         "median": float(np.median(values)) if values.size else np.nan,
-                         "std": float(values.std(ddof=1)) if values.size > 1 else np.nan,
-                         "ci_low": lo, "ci_high": hi, "note": ci_note(values.size),
-                         "direction": "" if machine else direction_of(metric, directions) or "",
-                         "unit": unit_of(metric), "kind": "machine" if machine else "metric"})
-    return pd.DataFrame(rows)
-
-
-def _labels(runs: pd.DataFrame, group_by: tuple[str, ...]) -> pd.Series:
-    """Each run's group label ("a/b" for several group-by columns)."""
-    return runs[list(group_by)].astype("str").agg("/".join, axis=1)
-
-
-def _pairs_frame(runs: pd.DataFrame, labels: pd.Series, keys: list[str], metrics: list[str], a: str,
-                 b: str) -> pd.DataFrame:
-    """Runs of ``a`` and ``b`` paired on ``keys``: a row per pair, columns ``<metric>_a``, ``<metric>_b``."""
-    left = runs[labels == a][keys + metrics]
-    right = runs[labels == b][keys + metrics]
-    return left.merge(right, on=keys, how="inner", suffixes=("_a", "_b"))
-
-
-def _wilcoxon(diff: np.ndarray) -> float:
-    if diff.size == 0:
-        return np.nan
-    if np.all(diff == 0):
-        return 1.0
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return float(stats.wilcoxon(diff).pvalue)
-
-
-PAIRED_COLUMNS = ["a", "b", "metric", "n_pairs", "mean_a", "mean_b", "diff_mean", "ci_low", "ci_high",
-                  "p_wilcoxon", "note", "direction", "better"]
-
-
-def paired(runs: pd.DataFrame, metrics: list[str], opts: SweepOptions, choice_columns: list[str],
-           directions: dict[str, Direction]) -> pd.DataFrame:
-    """Paired-by-seed comparison of every requested pair of groups (b - a)."""
-    chosen = runs[runs["status"].isin(opts.statuses)] if len(runs) else runs
-    if chosen.empty:
-        return pd.DataFrame(columns=PAIRED_COLUMNS)
-    labels = _labels(chosen, opts.group_by)
-    groups = sorted(labels.unique())
-    pairs = opts.pairs if opts.pairs is not None else tuple(itertools.combinations(groups, 2))
-    keys = ["seed"] + [c for c in choice_columns if c not in opts.group_by]
-    compared = [m for m in metrics if m not in MACHINE_METRICS]
-    rows = []
-    for a, b in pairs:
-        joined = _pairs_frame(chosen, labels, keys, compared, a, b)
-        for metric in compared:
-            va, vb = (joined[f"{metric}_{side}"].to_numpy(dtype="float64") for side in ("a", "b"))
-            both = np.isfinite(va) & np.isfinite(vb)
-            if not both.any():
-                continue    # no run of a shares its seed (and other choices) with a run of b
-            va, vb = va[both], vb[both]
-            diff = vb - va
-            lo, hi = bootstrap_ci(diff, _rng(opts.seed, a, b, metric), opts.n_boot, opts.ci)
-            direction = direction_of(metric, directions)
-            rows.append({"a": a, "b": b, "metric": metric, "n_pairs": int(diff.size),
-                         "mean_a": float(va.mean()), "mean_b": float(vb.mean()),
-                         "diff_mean": float(diff.mean()),
-                         "ci_low": lo, "ci_high": hi,
-                         "p_wilcoxon": _wilcoxon(diff) if diff.size >= MIN_N_CI else np.nan,
-                         "note": ci_note(diff.size).replace("n=", "pairs=").replace("CI", "CI, no test"),
-                         "direction": direction or "", "better": _better(a, b, lo, hi, direction)})
-    return pd.DataFrame(rows, columns=PAIRED_COLUMNS)
-
-
-def _better(a: str, b: str, lo: float, hi: float, direction: Direction) -> str:
-    if direction is None or np.isnan(lo) or lo <= 0 <= hi:
-        return ""
-    b_higher = lo > 0
-    return b if b_higher == (direction == "higher") else a
-
-
-def _significant(values: pd.Series, digits: int = 5) -> pd.Series:
-    return values.map(lambda v: float(f"{v:.{digits}g}") if np.isfinite(v) else v)
-
-
-def ranks(summary: pd.DataFrame, group_by: tuple[str, ...]) -> pd.DataFrame:
-    """Groups ranked per metric by mean (1 = best); metrics without a direction are left out.
-
-    Means equal to 5 significant digits tie (they share the lower rank).
-    """
-    ranked = summary[summary["direction"].isin(["lower", "higher"])
-                     & ~summary["metric"].isin(MACHINE_METRICS)].copy()
-    if ranked.empty:
-        return pd.DataFrame(columns=[*group_by, "mean_rank"])
-    ranked["group"] = ranked[list(group_by)].astype("str").agg("/".join, axis=1)
-    key = _significant(ranked["mean"].astype("float64"))
-    ranked["key"] = np.where(ranked["direction"] == "lower", key, -key)
-    ranked["rank"] = ranked.groupby("metric")["key"].rank(method="min")
-    wide = ranked.pivot(index="group", columns="metric", values="rank")
-    wide = wide[list(dict.fromkeys(ranked["metric"]))]
-    wide["mean_rank"] = wide.mean(axis=1)
-    return wide.sort_values("mean_rank", kind="stable").reset_index()
-
-
 def analyze_sweep(root: str | Path, opts: SweepOptions | None = None, workers: int | None = None,
                   progress: Callable[[int, int], None] | None = None) -> SweepResult:
-    """Analyze every run below ``root`` (``workers`` processes; ``progress(done, total)``) and tabulate."""
-    opts = opts or SweepOptions()
-    runs, problems, directions, choice_columns = collect_runs(Path(root), opts.run, workers, progress)
-    missing = [g for g in opts.group_by if g not in runs.columns]
-    if runs.empty or missing:
-        if missing and not runs.empty:
-            problems.loc[len(problems)] = {"run": ".", "severity": "error",
-                                           "problem": f"group-by column(s) {missing} not among the choices"}
-        empty = pd.DataFrame()
-        return SweepResult(runs, problems, empty, empty, empty, directions, choice_columns, opts.group_by)
-    metrics = metric_columns(runs, choice_columns)
-    summary = summarize(runs, metrics, opts, directions)
-    pairs = paired(runs, metrics, opts, choice_columns, directions)
-    return SweepResult(runs, problems, summary, pairs, ranks(summary, opts.group_by), directions,
-                       choice_columns, opts.group_by)
+    """Analyze every run below ``root`` (``workers`` processes; ``progress(done, total)``) and tabulate.
 
-
-def _cell(row: pd.Series) -> str:
-    if np.isfinite(row["ci_low"]):
-        return f"{row['mean']:.4g} [{row['ci_low']:.4g}, {row['ci_high']:.4g}]"
-    return f"{row['mean']:.4g} (n={row['n']}, no CI)"
-
-
-def summary_wide(summary: pd.DataFrame, group_by: tuple[str, ...]) -> pd.DataFrame:
-    """Metrics as rows, groups as columns, cells ``mean [ci_low, ci_high]`` (for printing).
-
-    Machine figures (wall time, real-time factor) come last; a cell without a CI says why.
+    Raises :class:`SweepInputError` for a group-by key no run has and for two runs with the same
+    identity and seed (nothing is tabulated from such a sweep).
     """
-    if summary.empty:
-        return summary
-    cell = summary.apply(_cell, axis=1)
-    frame = summary.assign(group=summary[list(group_by)].astype("str").agg("/".join, axis=1), cell=cell)
-    wide = frame.pivot(index="metric", columns="group", values="cell")
-    kinds = dict(zip(summary["metric"], summary.get("kind", pd.Series("metric", index=summary.index)),
-                     strict=False))
-    order = sorted(dict.fromkeys(summary["metric"]), key=lambda m: kinds.get(m) == "machine")
-    return wide.loc[order].reset_index()
+    opts = opts or SweepOptions()
+    _refuse_duplicates(Path(root))
+    runs, problems, directions, identity, units = collect_runs(Path(root), opts.run, workers, progress)
+    empty = pd.DataFrame()
+    if runs.empty:
+        return SweepResult(runs, problems, empty, empty, empty, directions, identity, opts.group_by or (),
+                           units=units)
+    d = design(runs, identity, opts.group_by)
+    check_unique(runs, d.identity)
+    metrics = metric_columns(runs, identity)
+    pairs, warnings = comparable_pairs(runs, d)
+    pairs, refused = _requested(pairs, opts.pairs, runs, d)
+    for text in warnings:
+        problems.loc[len(problems)] = {"run": ".", "severity": "warning", "problem": text}
+    summary = groupstats.summarize(runs, metrics, d, directions, units, opts.statuses, opts.seed, opts.n_boot,
+                                   opts.ci)
+    compared = groupstats.paired(runs, metrics, d, pairs, refused, directions, opts.seed, opts.n_boot,
+                                 opts.ci)
+    ranked = groupstats.ranks(summary, d, warnings)
+    return SweepResult(runs, problems, summary, compared, ranked, directions, identity, d.keys, d, units,
+                       warnings, across_tasks(runs, summary, d, opts))
+
+
+def _refuse_duplicates(root: Path) -> None:
+    """Two runs with the same identity and seed, found from the manifests before any run is analyzed."""
+    rows = []
+    for run_dir in find_runs(root):
+        try:
+            manifest = read_manifest(run_dir)
+        except RunLoadError:
+            continue          # reported as skipped by the analysis
+        rel = str(run_dir.relative_to(root)) if run_dir != root else "."
+        rows.append({"run": rel, "seed": manifest.get("seed"), **run_identity(manifest)})
+    frame = pd.DataFrame(rows)
+    if len(frame) > 1:
+        identity = tuple(c for c in frame.columns if c not in ("run", "seed"))
+        check_unique(frame.fillna({c: DEFAULT for c in identity}), identity)
+
+
+@dataclass
+class Aggregates:
+    """Per-algorithm aggregates across tasks (:mod:`swarmbox.analysis.aggregate`)."""
+
+    tasks: tuple[str, ...]
+    iqm: pd.DataFrame
+    improvement: pd.DataFrame
+    profiles: pd.DataFrame
+
+
+def across_tasks(runs: pd.DataFrame, summary: pd.DataFrame, d: Design,
+                 opts: SweepOptions) -> Aggregates | None:
+    """IQM, P(improvement) and performance profiles of the compared groups over the tasks, when there
+    are at least two groups and two tasks; None otherwise."""
+    tasks = opts.tasks if opts.tasks is not None else d.strata
+    unknown = [t for t in tasks if t not in runs.columns]
+    if unknown:
+        raise SweepInputError(f"task key(s) {unknown} are not among the runs' seed, choices and overrides")
+    if not tasks:
+        return None
+    frame = runs.assign(_algorithm=labels(runs, d.group_by), _task=labels(runs, tasks))
+    if frame["_algorithm"].nunique() < 2 or frame["_task"].nunique() < 2:
+        return None
+    directed = summary[summary["kind"].eq("metric") & summary["direction"].isin(["lower", "higher"])]
+    metrics = dict(zip(directed["metric"], directed["direction"], strict=False))
+    iqm, improvement, profiles = aggregate.aggregate(frame, metrics, "_algorithm", "_task", opts.seed,
+                                                     opts.n_boot, opts.ci)
+    return Aggregates(tuple(tasks), iqm, improvement, profiles)
+
+
+Triple = tuple[str, str, str]
+
+
+def _requested(pairs: list[Triple], wanted: tuple[tuple[str, str], ...] | None, runs: pd.DataFrame,
+               d: Design) -> tuple[list[Triple], list[Triple]]:
+    """The comparable (stratum, a, b) to tabulate (all, or those asked for, in the asked order), and
+    (a, b, why) for every two groups that are not comparable (or were asked for and are not)."""
+    group = labels(runs, d.group_by)
+    shared = {(a, b) for _, a, b in pairs} | {(b, a) for _, a, b in pairs}
+    asked = wanted if wanted is not None else tuple(
+        (a, b) for a, b in itertools.combinations(sorted(group.unique()), 2))
+    chosen = [(s, a, b) for a, b in asked for s, x, y in pairs if {x, y} == {a, b}]
+    known = set(group)
+    refused = [(a, b, not_comparable(runs, d, a, b, group) if {a, b} <= known
+                else f"no group {', '.join(sorted({a, b} - known))} (groups: {', '.join(sorted(known))})")
+               for a, b in asked if (a, b) not in shared]
+    return chosen, refused

@@ -2,8 +2,9 @@
 
 Windows tile the unified clock: window k is [k*w, (k+1)*w) and is stamped with its end, (k+1)*w, the
 first moment its value is known. Samples are stamped on ticks and the estimated clock offsets are off by
-microseconds, so a sample up to half a tick (12.5 ms) before a window's start counts in that window:
-without that tolerance a tick sample landing a microsecond early would fall into the previous window.
+microseconds, so a sample up to half a tick (``tick_s / 2``, 12.5 ms at 40 Hz) before a window's start
+counts in that window: without that tolerance a tick sample landing a microsecond early would fall into
+the previous window.
 Monitored metrics, per drone and window:
 
 - ``latency_ms``: mean latency of the delivered messages the drone sent or that were sent to it,
@@ -26,20 +27,22 @@ MONITORED = ("latency_ms", "loss_ratio", "disc_n_m", "disc_e_m", "disc_d_m")
 COLUMNS = [T, "drone", "metric", "value"]
 
 
-TOLERANCE_S = 0.0125
+#: Tick length assumed when none is given (40 Hz, the default ``run.tick_hz``).
+TICK_S = 0.025
 
 
-def _stamp(t: pd.Series, window_s: float) -> np.ndarray:
-    tol = min(TOLERANCE_S, window_s / 2)
+def _stamp(t: pd.Series, window_s: float, tick_s: float = TICK_S) -> np.ndarray:
+    tol = min(tick_s / 2, window_s / 2)
     return (np.floor((t.to_numpy(dtype="float64") + tol) / window_s) + 1) * window_s
 
 
-def network_timeline(flow: pd.DataFrame, drones: list[int], window_s: float) -> pd.DataFrame:
+def network_timeline(flow: pd.DataFrame, drones: list[int], window_s: float,
+                     tick_s: float = TICK_S) -> pd.DataFrame:
     both = touching(flow, ["t_send", "latency_ms", "delivered", "counted", "lost"])
     both = both[both["agent"].isin(drones)]
     if both.empty:
         return pd.DataFrame(columns=COLUMNS)
-    both = both.assign(**{T: _stamp(both["t_send"], window_s)})
+    both = both.assign(**{T: _stamp(both["t_send"], window_s, tick_s)})
     got = both[both["delivered"]]
     lat = got.groupby([T, "agent"])["latency_ms"].mean().rename("latency_ms")
     counted = both[both["counted"]]
@@ -48,20 +51,23 @@ def network_timeline(flow: pd.DataFrame, drones: list[int], window_s: float) -> 
     return wide.melt(id_vars=[T, "drone"], var_name="metric", value_name="value").dropna(subset=["value"])
 
 
-def discrepancy_timeline(disc: pd.DataFrame, drones: list[int], window_s: float) -> pd.DataFrame:
+def discrepancy_timeline(disc: pd.DataFrame, drones: list[int], window_s: float,
+                         tick_s: float = TICK_S) -> pd.DataFrame:
     disc = disc[disc["node"].isin(drones)]
     if disc.empty:
         return pd.DataFrame(columns=COLUMNS)
-    disc = disc.assign(**{T: _stamp(disc[T], window_s)})
+    disc = disc.assign(**{T: _stamp(disc[T], window_s, tick_s)})
     cols = ["disc_n_m", "disc_e_m", "disc_d_m"]
     wide = disc.groupby([T, "node"])[cols].mean().reset_index().rename(columns={"node": "drone"})
     return wide.melt(id_vars=[T, "drone"], var_name="metric", value_name="value").dropna(subset=["value"])
 
 
 def drone_timeline(flow: pd.DataFrame, disc: pd.DataFrame, drones: list[int],
-                   window_s: float) -> pd.DataFrame:
-    """All monitored metrics, per drone and window (tidy)."""
-    parts = [network_timeline(flow, drones, window_s), discrepancy_timeline(disc, drones, window_s)]
+                   window_s: float, tick_s: float = TICK_S) -> pd.DataFrame:
+    """All monitored metrics, per drone and window (tidy); ``tick_s``: the run's tick length."""
+    tick_s = tick_s if np.isfinite(tick_s) and tick_s > 0 else TICK_S
+    parts = [network_timeline(flow, drones, window_s, tick_s),
+             discrepancy_timeline(disc, drones, window_s, tick_s)]
     parts = [p for p in parts if len(p)]
     if not parts:
         return pd.DataFrame(columns=COLUMNS)

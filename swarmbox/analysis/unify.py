@@ -15,6 +15,11 @@ contributes ``min sample - typical delay`` with a low weight. Pair estimates are
 per-node offset and drift by weighted least squares over the communication graph, anchored at the
 ground, so a drone that talks only to its leader is still placed on the ground clock. A node with no
 path to the ground keeps offset 0 (method ``assumed``).
+
+A node whose clock *steps* (jumps by more than ``step_min_s``) is not one line: each stretch between
+steps is a clock of its own (:mod:`swarmbox.analysis.clock_steps`), estimated and applied as above,
+listed in the clock table as the node's ``life`` 1, 2, ... with ``from_u`` (when it began) and
+``step_s`` (the jump), and reported in the run's problems.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from swarmbox.analysis import clock_steps, sampling
 from swarmbox.analysis.load import GROUND, NET, RunData, node_id
 
 #: Name of the unified-time column added to every table (seconds on the ground clock).
@@ -37,6 +43,7 @@ class ClockOptions:
     window_s: float = 5.0
     min_drift_windows: int = 4
     one_way_weight: float = 0.05
+    step_min_s: float = 0.1      # a larger jump of a drone's clock is a step (0: never split)
 
 
 @dataclass(frozen=True, slots=True)
@@ -274,20 +281,105 @@ def unify(run: RunData, opts: ClockOptions | None = None, sent_times: bool = Tru
 
     Messages also get ``t_sent_u`` (unless ``sent_times`` is False; no metric reads it): the sender's
     ``t_sent_s`` mapped with the sender's clock.
-    Returns the clock table, with the configured truth from ``run.json`` (``clocks``) beside it.
+    Returns the clock table, with the configured truth from ``run.json`` (``clocks``) beside it; a clock
+    step adds a row per life of the node and a line to ``run.problems``.
     """
+    opts = opts or ClockOptions()
+    tick_s = sampling.tick_s(run)
+    steps = (clock_steps.find_steps(run.tables["state"], tick_s, opts.step_min_s)
+             if opts.step_min_s > 0 else [])
+    if steps:
+        return _unify_lives(run, opts, steps, tick_s, sent_times)
+    return _unify_plain(run, opts, sent_times)
+
+
+def _unify_plain(run: RunData, opts: ClockOptions, sent_times: bool) -> pd.DataFrame:
+    """:func:`unify` with one clock per node."""
     clocks = estimate_clocks(run.tables["messages"], run.nodes, opts)
     for frame in run.tables.values():
         frame[T] = to_unified(frame["t_s"], frame["node"], clocks)
     if sent_times:
         msgs = run.tables["messages"]
         msgs["t_sent_u"] = to_unified(msgs["t_sent_s"], msgs["src"].fillna(GROUND), clocks)
+    clocks = clocks.assign(life=0, from_u=np.nan, step_s=0.0)
     return _with_truth(clocks, run.manifest.get("clocks") or {})
 
 
+def _unify_lives(run: RunData, opts: ClockOptions, steps: list[clock_steps.Step], tick_s: float,
+                 sent_times: bool) -> pd.DataFrame:
+    """:func:`unify` of a run where some clocks step: every life of a node is a clock of its own.
+
+    A step is kept only when the messages confirm it (the lives' estimated clocks differ by at least
+    half of ``step_min_s`` there): a real-time node that stalls and catches up also moves its local
+    time against its ticks, but not its clock against the others'."""
+    ids = clock_steps.clock_ids(run.tables, steps, tick_s)
+    msgs = run.tables["messages"]
+    remapped = pd.DataFrame({"node": ids["messages"], "src": ids["messages_src"], "kind": msgs["kind"],
+                             "t_s": msgs["t_s"], "t_sent_s": msgs["t_sent_s"]})
+    lives = sorted({int(i) for i in np.concatenate(list(ids.values())) if i >= clock_steps.LIFE_STRIDE})
+    clocks = estimate_clocks(remapped, [*run.nodes, *lives], opts)
+    confirmed = _confirmed(steps, clocks, opts.step_min_s / 2)
+    if len(confirmed) < len(steps):
+        if not confirmed:
+            return _unify_plain(run, opts, sent_times)
+        return _unify_lives(run, opts, confirmed, tick_s, sent_times)
+    for name, frame in run.tables.items():
+        frame[T] = to_unified(frame["t_s"], pd.Series(ids[name], index=frame.index), clocks)
+    if sent_times:
+        src = pd.Series(ids["messages_src"], index=msgs.index)
+        msgs["t_sent_u"] = to_unified(msgs["t_sent_s"], src, clocks)
+    clock_id = clocks["node"].to_numpy(dtype=np.int64)
+    life = np.where(clock_id >= 0, clock_id // clock_steps.LIFE_STRIDE, 0)
+    clocks = clocks.assign(node=clock_id - life * clock_steps.LIFE_STRIDE, life=life)
+    clocks = _life_starts(clocks, run.tables["state"], ids["state"])
+    clocks = clocks.sort_values(["node", "life"], kind="stable").reset_index(drop=True)
+    clocks = _with_truth(clocks, run.manifest.get("clocks") or {})
+    run.problems.extend(clock_steps.describe(steps, clocks))
+    return clocks
+
+
+def _confirmed(steps: list[clock_steps.Step], clocks: pd.DataFrame, least_s: float) -> list[clock_steps.Step]:
+    """The steps whose two lives' estimated clocks differ by at least ``least_s`` at the step."""
+    est = clocks.set_index("node")
+    kept = []
+    for s in steps:
+        life = sum(o.node == s.node and o.tick <= s.tick for o in steps)
+        after, before = s.node + life * clock_steps.LIFE_STRIDE, s.node + (life - 1) * clock_steps.LIFE_STRIDE
+        if after not in est.index or before not in est.index:
+            continue
+        reading = [float(est.loc[n, "offset_s"]) + (1 + float(est.loc[n, "drift_ppm"]) * 1e-6) * s.t_s
+                   for n in (after, before)]
+        if abs(reading[0] - reading[1]) >= least_s:
+            kept.append(s)
+    return kept
+
+
+def _life_starts(clocks: pd.DataFrame, state: pd.DataFrame, state_ids: np.ndarray) -> pd.DataFrame:
+    """``from_u``: the first unified state time of each life ≥ 1; ``step_s``: the jump of the node's
+    reading there, this life's clock minus the previous life's."""
+    first = pd.Series(state[T].to_numpy(), index=state_ids).groupby(level=0).min()
+    by_id = {(int(n), int(k)): (o, d) for n, k, o, d in
+             clocks[["node", "life", "offset_s", "drift_ppm"]].itertuples(index=False)}
+    from_u, step = [], []
+    for n, k in clocks[["node", "life"]].itertuples(index=False):
+        if k == 0:
+            from_u.append(np.nan)
+            step.append(0.0)
+            continue
+        t = float(first.get(n + k * clock_steps.LIFE_STRIDE, np.nan))
+        (o1, d1), (o0, d0) = by_id[(n, k)], by_id.get((n, k - 1), (0.0, 0.0))
+        from_u.append(t)
+        step.append((o1 + (1 + d1 * 1e-6) * t) - (o0 + (1 + d0 * 1e-6) * t))
+    return clocks.assign(from_u=from_u, step_s=step)
+
+
 def _with_truth(clocks: pd.DataFrame, truth: dict) -> pd.DataFrame:
+    """The configured clocks beside the estimates (unknown, NaN, after a step: no config says it)."""
     true = {node_id(str(k)): v for k, v in truth.items() if isinstance(v, dict)}
-    clocks["true_offset_s"] = [float(true.get(n, {}).get("offset_s", 0.0)) for n in clocks["node"]]
-    clocks["true_drift_ppm"] = [float(true.get(n, {}).get("drift_ppm", 0.0)) for n in clocks["node"]]
+    first = (clocks["life"] == 0).to_numpy()
+    clocks["true_offset_s"] = np.where(first, [float(true.get(n, {}).get("offset_s", 0.0))
+                                               for n in clocks["node"]], np.nan)
+    clocks["true_drift_ppm"] = np.where(first, [float(true.get(n, {}).get("drift_ppm", 0.0))
+                                                for n in clocks["node"]], np.nan)
     clocks["offset_error_ms"] = (clocks["offset_s"] - clocks["true_offset_s"]) * 1e3
     return clocks

@@ -33,6 +33,10 @@ _NO_DRONES: frozenset[int] = frozenset()
 _ICEBREAK, _PREPARATION, _EXECUTION = Stage.ICEBREAK, Stage.PREPARATION, Stage.EXECUTION
 
 
+def _ids(ids: list[int]) -> str:
+    return f"drone {ids[0]}" if len(ids) == 1 else f"drones {sorted(ids)}"
+
+
 class GroundObserver(Protocol):
     """Watches the ground node from outside the swarm logic (e.g. the live monitor).
 
@@ -56,6 +60,7 @@ class GroundNode(Node):
         self.proximity = ProximityTracker(self.timing.proximity_m, self.timing.proximity_window_s)
         self.prox_pairs: dict[tuple[int, int], float] = {}   # alerted pair -> distance, this tick
         self.observer: GroundObserver | None = None
+        self._orphaned_since: int | None = None   # tick since which every direct inferior aborted
         self._adopt_until: int | None = None   # a restarted ground listens until this tick (rejoin)
         # the base class's on_report does nothing: not calling it saves a call per Report
         self._wants_reports = type(algorithm).on_report is not GroundAlgorithm.on_report
@@ -124,11 +129,34 @@ class GroundNode(Node):
                                     f"{len(self.alive_reports())} alive inferiors complete, "
                                     f"{total} of {self.mission.swarm_size} drones joined")
             return
+        if stage is not _ICEBREAK and self._commands_none():
+            return
         ready = alive > 0 and satisfied and self.inferiors_complete()
         if stage is _ICEBREAK:
             ready = ready and total >= self.mission.swarm_size
         if ready:
             self.enter(Stage(stage + 1))
+
+    def _commands_none(self) -> bool:
+        """Whether the ground must not advance: before LANDING, every drone it commands directly has
+        aborted (under leader_follower: the leader). Their inferiors hand over to their successors —
+        the ground, for a leader's followers — so the ground holds the stage for as long as a
+        handover takes (``lost_superior_ticks + lost_inferior_ticks``) and the mission goes on under
+        it; if no drone has joined by then, nothing is left to complete the mission and the ground
+        aborts. Counting the aborted drones as done would land the swarm early with the run ``ok``."""
+        direct = [i for i, inf in self.inferiors.items() if inf.alive]
+        if (self.stage is Stage.LANDING or not direct
+                or any(self.inferiors[i].report.stage != Stage.ABORT for i in direct)):
+            self._orphaned_since = None
+            return False
+        tick = self.time.tick
+        if self._orphaned_since is None:
+            self._orphaned_since = tick
+        if tick - self._orphaned_since <= self.timing.lost_superior_ticks + self.timing.lost_inferior_ticks:
+            return True
+        self.enter(Stage.ABORT, f"every drone the ground commands aborted ({_ids(direct)}) and none "
+                                f"took over: the {self.stage.name} was cut short")
+        return True
 
     def rejoin(self) -> None:
         """This process restarts the ground of a run under way: adopt the swarm's stage from the

@@ -6,7 +6,7 @@ to a list did); the recorder then reads a hand-over as one numpy structured arra
 (:mod:`swarmbox.record.packed`), so the row's numbers never become Python objects again. Turning
 millions of row tuples back into columns, cold in the cache, was the log writer's whole cost.
 
-Text columns are written as codes of :data:`TEXTS`, a process-wide table that only grows: the
+Text columns are written as codes of :data:`TEXTS`, a process-wide, bounded table that only grows: the
 vocabularies (``send``, ``report``, ``ok``, ...) have fixed codes below, free text (a drop reason, a
 broadcast's destination list, a safety monitor's reason) takes a code on first use. The field order
 and names are the log schema's (``swarmbox.record.schema``), which checks them on import.
@@ -20,12 +20,24 @@ import threading
 
 class TextTable:
     """Text <-> small integer code. Codes are never reused or removed, so a code read at any time
-    decodes with the table as it is later."""
+    decodes with the table as it is later.
 
-    def __init__(self) -> None:
+    The table holds at most ``limit`` texts: it lives as long as its process (a sweep worker runs
+    many jobs), and free text that embeds numbers would otherwise grow it without end. Past the
+    limit every new text is logged as :attr:`OVERFLOW` and counted in :attr:`overflowed` (the run
+    reports the count in ``run.json`` ``problems``); texts already in the table keep their codes.
+    """
+
+    LIMIT = 1 << 16
+    OVERFLOW = "(text not logged: the text table is full)"
+
+    def __init__(self, limit: int = LIMIT) -> None:
+        self.limit = max(2, int(limit))
         self.texts: list[str] = []
         self._codes: dict[str, int] = {}
         self._lock = threading.Lock()   # a transport may log from its own thread
+        self.overflowed = 0             # texts refused a code
+        self._overflow: int | None = None
 
     def code(self, text: str) -> int:
         code = self._codes.get(text)
@@ -33,9 +45,19 @@ class TextTable:
             with self._lock:
                 code = self._codes.get(text)
                 if code is None:
-                    code = len(self.texts)
-                    self.texts.append(str(text))
-                    self._codes[text] = code
+                    code = self._add(str(text))
+        return code
+
+    def _add(self, text: str) -> int:
+        if len(self.texts) >= self.limit - (self._overflow is None):
+            self.overflowed += 1
+            if self._overflow is None:   # the last free code: the marker
+                self._overflow = len(self.texts)
+                self.texts.append(self.OVERFLOW)
+            return self._overflow
+        code = len(self.texts)
+        self.texts.append(text)
+        self._codes[text] = code
         return code
 
     def snapshot(self) -> list[str]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import subprocess
+from collections.abc import Mapping
 
 
 class ProcessSet:
@@ -33,3 +34,16 @@ class ProcessSet:
                 self._reported.add(i)
                 out.append((i, int(proc.returncode)))
         return out
+
+
+#: names of further key variables (comma-separated), set by the process that handed the keys over
+KEY_VARS = "SWARMBOX_KEY_VARS"
+
+
+def without_keys(env: Mapping[str, str]) -> dict[str, str]:
+    """``env`` without SwarmBox's key variables (``SWARMBOX_*_KEY`` and those ``SWARMBOX_KEY_VARS``
+    names, e.g. a custom ``run.net.key_env``): a vehicle or helper process is handed only the key it
+    needs, explicitly, never the swarm key its parent may hold."""
+    named = {n for n in env.get(KEY_VARS, "").split(",") if n}
+    return {k: v for k, v in env.items()
+            if k not in named and not (k.startswith("SWARMBOX_") and k.endswith("_KEY"))}

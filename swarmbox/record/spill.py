@@ -10,6 +10,7 @@ once complete, so a reader never sees half a file under its final name.
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -118,11 +119,13 @@ class SpillFile:
 
 
 def split(spill: SpillFile, tails: Mapping[str, Chunk], root: Path,
-          nodes: Mapping[int, Sequence[str]]) -> list[str]:
+          nodes: Mapping[int, Sequence[str]]) -> tuple[list[str], list[str]]:
     """Cut the (closed) spill's batches and buffered tails into ``<root>/<node>/<table>.parquet`` for
-    every node and each of its tables (``nodes``: node id -> table names); returns what could not be
-    written."""
+    every node and each of its tables (``nodes``: node id -> table names). Returns the files not
+    written (``<node>/<table>.parquet``) and what went wrong."""
     errors: list[str] = []
+    failed: list[str] = []
+    causes: dict[str, list[str]] = {}   # cause -> the files it cost
     with ThreadPoolExecutor(max_workers=2) as pool:
         for table in TABLES:
             owners = [node for node, tables in nodes.items() if table in tables]
@@ -135,10 +138,22 @@ def split(spill: SpillFile, tails: Mapping[str, Chunk], root: Path,
                     _buffered(tails[table], pieces)
             except Exception as exc:  # noqa: BLE001 - keep going: other tables may be fine
                 errors.append(f"{table}: {type(exc).__name__}: {exc}")
-            jobs = [pool.submit(_write_node_file, root / node_name(node) / f"{table}.parquet", table,
-                                pieces.get(node, [])) for node in owners]
-            errors += [str(e) for e in (j.exception() for j in jobs) if e is not None]
-    return errors
+            jobs = {f"{node_name(node)}/{table}.parquet": pool.submit(
+                _write_node_file, root / node_name(node) / f"{table}.parquet", table, pieces.get(node, []))
+                for node in owners}
+            for name, job in jobs.items():
+                if (exc := job.exception()) is not None:
+                    failed.append(name)
+                    causes.setdefault(_why(exc), []).append(name)
+    errors += [f"{', '.join(names)} not written: {why}" for why, names in causes.items()]
+    return failed, errors
+
+
+def _why(exc: BaseException) -> str:
+    """The cause in a few words: ``No space left on device``, ``File too large``."""
+    text = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+    found = re.search(r"\[errno \d+\] (.+)", text)
+    return found.group(1).strip() if found else f"{type(exc).__name__}: {text}"
 
 
 def _buffered(chunk: Chunk, pieces: dict[int, list[pa.Table]]) -> None:
@@ -173,5 +188,9 @@ def _write_node_file(path: Path, table: str, pieces: list[pa.Table]) -> None:
     data = data.cast(schema)
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_name(path.name + ".partial")
-    pq.write_table(data, partial, compression="zstd", use_dictionary=text_columns(table))
+    try:
+        pq.write_table(data, partial, compression="zstd", use_dictionary=text_columns(table))
+    except BaseException:
+        partial.unlink(missing_ok=True)   # half a file is never left behind, under any name
+        raise
     os.replace(partial, path)

@@ -11,7 +11,8 @@ it is no faster than encoding in the loop (``writer="thread"``, the default): th
 pipe cost the loop about what the encoding would.
 
 Protocol (pickled messages on stdin): ``("chunk", encoded)`` any number of times, then
-``("close", [encoded tails], {node: tables}, logs_dir)``; the reply on stdout is the list of errors.
+``("close", [encoded tails], {node: tables}, logs_dir)``; the reply on stdout is the files not
+written and the list of errors.
 ``python -m swarmbox.record.worker SPILL_DIR HOLD_BYTES`` runs the process side.
 """
 
@@ -28,6 +29,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from swarmbox.hal.launch import without_keys
 from swarmbox.record.spill import Chunk, SpillFile, split
 
 #: pipe capacity asked for (Linux caps it at /proc/sys/fs/pipe-max-size, 1 MiB by default)
@@ -56,6 +58,7 @@ class WriterProcess:
         self.spill_root, self.hold_bytes = spill_root, hold_bytes
         self._proc: subprocess.Popen | None = None
         self._sent = 0   # chunks the process has taken
+        self.broken = False   # it died before it could finish the logs
 
     @property
     def started(self) -> bool:
@@ -99,20 +102,22 @@ class WriterProcess:
             data = data[os.write(fd, data):]
 
     def finish(self, tails: Sequence[Chunk], nodes: Mapping[int, Sequence[str]],
-               logs_root: Path) -> list[str]:
-        """Send the rows still buffered, have the process cut every per-node file; its errors."""
+               logs_root: Path) -> tuple[list[str], list[str]]:
+        """Send the rows still buffered, have the process cut every per-node file; the files it could
+        not write and its errors (:attr:`broken` set if it died first)."""
         proc = self._proc
         assert proc is not None
         try:
             self._write(("close", [encode(t) for t in tails], {n: list(t) for n, t in nodes.items()},
                          str(logs_root)))
             proc.stdin.close()
-            errors = pickle.load(proc.stdout)
+            failed, errors = pickle.load(proc.stdout)
         except (BrokenPipeError, EOFError, OSError, pickle.UnpicklingError):
-            errors = [f"log writer process failed ({self._exit_note()})"]
+            self.broken = True
+            failed, errors = [], [f"log writer process failed ({self._exit_note()})"]
         proc.wait()
         proc.stdout.close()
-        return errors
+        return failed, errors
 
     def kill(self) -> None:
         if self._proc is not None and self._proc.poll() is None:
@@ -121,7 +126,7 @@ class WriterProcess:
 
     def _start(self) -> None:
         package_root = str(Path(__file__).resolve().parents[2])   # the directory holding swarmbox/
-        env = dict(os.environ)
+        env = without_keys(os.environ)   # it encodes rows: it needs no key
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
         self._proc = subprocess.Popen([sys.executable, "-m", "swarmbox.record.worker", str(self.spill_root),
                                        str(self.hold_bytes)],
@@ -158,13 +163,15 @@ def serve(spill_root: Path, hold_bytes: int, inp: Any, out: Any) -> int:
             continue
         _, tails, nodes, logs_root = message
         spill.close()
+        failed: list[str] = []
         try:
             cut = {c.table: c for c in map(decode, tails)}
             errors = [f"log writer failed: {e}" for e in errors]
-            errors += split(spill, cut, Path(logs_root), nodes)
+            failed, more = split(spill, cut, Path(logs_root), nodes)
+            errors += more
         except Exception as exc:  # noqa: BLE001 - reported to the run
             errors.append(f"cutting the logs: {type(exc).__name__}: {exc}")
-        pickle.dump(errors, out)
+        pickle.dump((failed, errors), out)
         out.flush()
         return 0
 

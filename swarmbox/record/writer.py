@@ -100,24 +100,20 @@ class _Packed(NamedTuple):
 
 
 class _HandOver(threading.Thread):
-    """Background thread: each chunk in its inbox goes to ``sink``; failures are kept for close().
+    """Background thread: each item in its inbox goes to ``sink``; failures are kept for close()."""
 
-    ``stop_on_error``: after one failure the rest are dropped (a writer process that is gone)."""
-
-    def __init__(self, sink: Callable[[Any], None], max_chunks: int, stop_on_error: bool) -> None:
+    def __init__(self, sink: Callable[[Any], None], max_chunks: int) -> None:
         super().__init__(name="swarmbox-recorder", daemon=True)
-        self.sink, self.stop_on_error = sink, stop_on_error
+        self.sink = sink
         self.inbox: queue.Queue[_Packed | _Group | None] = queue.Queue(maxsize=max_chunks)
         self.errors: list[str] = []
 
     def run(self) -> None:
-        while (chunk := self.inbox.get()) is not None:
-            if self.errors and self.stop_on_error:
-                continue
+        while (item := self.inbox.get()) is not None:
             try:
-                self.sink(chunk)
+                self.sink(item)
             except Exception as exc:  # noqa: BLE001 - reported by close(); later chunks still written
-                self.errors.append(f"{chunk.table} rows of nodes {chunk.nodes[:5]}...: "
+                self.errors.append(f"{item.table} rows of nodes {item.nodes[:5]}...: "
                                    f"{type(exc).__name__}: {exc}")
 
     def finish(self) -> None:
@@ -146,39 +142,52 @@ class Recorder:
         spill_root = self.run_dir / ".spill"
         self._spill = SpillFile(spill_root)
         self._process = WriterProcess(spill_root, self._spill.hold_bytes) if writer == "process" else None
-        if self._process is not None:
-            # room for the rows of the process's start-up (~0.3 s: a tick loop must not wait for it)
-            self._handover = _HandOver(self._to_process, max_chunks * 8, stop_on_error=True)
-        else:   # the thread only appends encoded batches to the spill file (pyarrow releases the GIL)
-            self._handover = _HandOver(self._append_group, max_chunks, stop_on_error=False)
+        # the writer process is dropped on the background thread while the tick thread hands over
+        self._swap = threading.Lock()
+        # with a process: room for the rows of its start-up (~0.3 s: a tick loop must not wait for it)
+        self._handover = _HandOver(self._sink, max_chunks * 8 if self._process else max_chunks)
         self._blocks = StateBlocks()
         self._unavailable = ""
+        self._lost = ""                # the writer process died holding rows: they are lost
         self._errors: list[str] = []   # chunks this thread could not encode
+        #: ``<node>/<table>.parquet`` files that could not be written (after :meth:`close`)
+        self.not_written: list[str] = []
 
     @property
     def writer(self) -> str:
         """Where the rows are encoded: ``thread``, ``process``, or the thread after a failed start."""
         if self._unavailable:
             return f"thread (writer process unavailable: {self._unavailable})"
+        if self._lost:
+            return f"process, then thread ({self._lost})"
         return "process" if self._process is not None else "thread"
 
-    def _to_process(self, item: _Packed) -> None:
-        """The hand-over thread's sink with a writer process: a process that cannot start leaves the
-        work to this thread, as with ``writer="thread"`` (nothing was sent to it, nothing is lost)."""
-        chunk, packed = item.chunk, item.packed
-        if self._process is not None:
+    def _sink(self, item: _Packed | _Group) -> None:
+        """The hand-over thread's one sink: an encoded batch is appended to the spill file; a chunk
+        for the writer process goes to it, or — when it cannot start or is gone — into this
+        process's spill, as with ``writer="thread"``."""
+        if isinstance(item, _Group):
+            self._spill.append_group(item.table, item.data, item.slot)
+            return
+        with self._swap:
+            proc = self._process
+        if proc is not None:
             try:
-                self._process.send(chunk, packed)
+                proc.send(item.chunk, item.packed)
                 return
-            except WriterUnavailable as exc:
-                self._unavailable = str(exc)
-                log.warning("log writer process unavailable (%s): rows are encoded by the run's own thread",
-                            exc)
-                self._process = None
-        self._spill.write(chunk)
+            except WriterUnavailable as exc:   # nothing was sent to it, nothing is lost
+                self._drop_process(proc, unavailable=str(exc))
+            except OSError as exc:             # it took chunks and died: those rows are lost
+                self._drop_process(proc, lost=str(exc))
+        self._spill.write(item.chunk)
 
-    def _append_group(self, group: _Group) -> None:
-        self._spill.append_group(group.table, group.data, group.slot)
+    def _drop_process(self, proc: WriterProcess, unavailable: str = "", lost: str = "") -> None:
+        log.warning("log writer process %s: rows are encoded by the run's own thread",
+                    f"unavailable ({unavailable})" if unavailable else f"gone ({lost})")
+        proc.kill()
+        with self._swap:
+            self._process = None
+            self._unavailable, self._lost = unavailable, lost
 
     def node(self, node_id: int) -> NodeLog:
         if node_id not in self.logs:
@@ -206,11 +215,13 @@ class Recorder:
     def flush(self) -> None:
         """Encode every buffered row (or serialise it for the writer process); what must go to disk
         goes to the background thread."""
+        with self._swap:
+            to_process = self._process is not None
         for table in TABLES:
             chunk = self._take(table)
             if chunk is None:
                 continue
-            item = self._encode(chunk) if self._process is None else _Packed(chunk, WriterProcess.pack(chunk))
+            item = _Packed(chunk, WriterProcess.pack(chunk)) if to_process else self._encode(chunk)
             if item is None:   # held in memory (or its failure noted): nothing for the background thread
                 continue
             if not self._handover.is_alive():
@@ -264,23 +275,33 @@ class Recorder:
         return Chunk(table, nodes, counts, [], data)
 
     def close(self) -> None:
-        """Write everything out as per-node files; raise OSError naming what could not be written.
+        """Write everything out as per-node files; raise OSError naming what could not be written
+        (the files: :attr:`not_written`).
 
         Rows still buffered go straight from memory into the per-node files, not through the spill
-        file (with a writer process: through the process, which holds the spilled rows' layout).
+        file (with a writer process: through the process, which holds the spilled rows' layout). If
+        the process is gone, they are written here, with every row it had not taken.
         """
         tails = {t: c for t in TABLES if (c := self._take(t)) is not None}
         self._handover.finish()
         errors = [f"log writer failed: {e}" for e in self._errors + self._handover.errors]
+        if self._lost:
+            errors.append(f"log writer process gone ({self._lost}): the rows it had taken are lost")
         nodes = {log.node_id: log.tables for log in self.logs.values()}
-        if self._process is not None and self._process.started:
-            if errors:
-                self._process.kill()
-            else:
-                errors += self._process.finish(list(tails.values()), nodes, self.root)
+        proc = self._process
+        if proc is not None and proc.started:
+            failed, more = proc.finish(list(tails.values()), nodes, self.root)
+            errors += more
+            if proc.broken:   # it died at the end: the tails at least, into the files it did not write
+                missing = {n: [t for t in tables if not (self.root / node_name(n) / f"{t}.parquet").exists()]
+                           for n, tables in nodes.items()}
+                failed, more = split(self._spill, tails, self.root, missing)
+                errors += more
         else:
             self._spill.close()
-            errors += split(self._spill, tails, self.root, nodes)
+            failed, more = split(self._spill, tails, self.root, nodes)
+            errors += more
+        self.not_written = failed
         if not errors:
             shutil.rmtree(self._spill.root, ignore_errors=True)
         if errors:

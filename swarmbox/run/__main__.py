@@ -28,7 +28,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig
 
-from swarmbox.run import interrupt, mode, sweep_state
+from swarmbox.run import claims, interrupt, mode, record, sweep_state
 from swarmbox.run.checks import INPUT_ERRORS
 from swarmbox.run.config import register
 from swarmbox.run.resume import ResumeMismatchError, finished_run
@@ -45,11 +45,9 @@ def verbose() -> bool:
 
 
 def _drop_if_empty(path: Path) -> None:
-    """Remove an output directory Hydra made for a job that wrote nothing (never a non-empty one)."""
-    try:
-        path.rmdir()
-    except OSError:
-        pass
+    """Remove an output directory Hydra made for a job that wrote nothing (never a non-empty one,
+    never one that existed before the command)."""
+    claims.drop_if_made(path)
 
 
 @hydra.main(config_path=CONF_DIR, config_name="config", version_base="1.3")
@@ -77,7 +75,7 @@ def main(cfg: DictConfig) -> str:
         _drop_if_empty(hydra_dir)
         refused = isinstance(exc, RunExistsError | ResumeMismatchError)
         tail = "" if refused else " (nothing was run or written)"
-        print(f"error: {exc}{tail}", file=sys.stderr, flush=True)
+        print(f"error: {record.scrub_error(str(exc), overrides)}{tail}", file=sys.stderr, flush=True)
         if not multirun:
             sys.exit(EXIT_INPUT)
         sweep_state.invalid(overrides, str(exc))
@@ -137,7 +135,8 @@ def cli() -> None:
     except SystemExit as exc:
         if exc.code == 1 and not sweep_state.any_entered():
             sys.stderr = real
-            text = one_line(held.getvalue()) or "the config could not be composed"
+            text = record.scrub_error(one_line(held.getvalue()), sys.argv[1:]) or \
+                "the config could not be composed"
             print(f"error: {text} (nothing was run or written)", file=real, flush=True)
             sys.exit(EXIT_INPUT)
         raise

@@ -11,8 +11,8 @@ from typing import Any
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
-from swarmbox.run import interrupt, sweep_state
-from swarmbox.run.runner import write_atomic
+from swarmbox.run import claims, interrupt, record, sweep_state
+from swarmbox.run.record import RunExistsError, write_atomic
 
 
 class SweepSummary(Callback):
@@ -23,11 +23,38 @@ class SweepSummary(Callback):
     interrupted, else 2 if a job's config was refused, else 1 if a run failed, else 0.
     """
 
+    _claim: claims.Claim | None = None
+
+    def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
+        """Before Hydra makes the run directory: note whether it existed (a refused command never
+        removes it), and refuse one that cannot be made in one line (exit 2)."""
+        from hydra.core.hydra_config import HydraConfig
+
+        HydraConfig.instance().set_config(config)   # as Hydra does next: hydra.run.dir reads it
+        run_dir = Path(config.hydra.run.dir)
+        claims.note_preexisting(run_dir)
+        record.scrub_logging(record.secret_values(config, list(config.hydra.overrides.task)))
+        try:
+            run_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            _refuse(f"run directory {run_dir} (hydra.run.dir) cannot be written: {exc.strerror or exc}")
+
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        """Claim the sweep directory: a second sweep into it while this one runs is refused (exit 2)."""
         sweep_state.entered()   # the config composed: later exit codes are the sweep's, not bad input
+        root = Path(config.hydra.sweep.dir)
+        claims.note_preexisting(root, *(root.iterdir() if root.is_dir() else ()))
+        try:
+            self._claim = claims.Claim(root, ".sweep.claim", "sweep").acquire()
+        except RunExistsError as exc:
+            _refuse(f"{exc}; wait for it to finish or choose another hydra.sweep.dir")
+        except OSError as exc:
+            _refuse(f"sweep directory {root} (hydra.sweep.dir) cannot be written: {exc.strerror or exc}")
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         root = Path(config.hydra.sweep.dir)
+        if self._claim is not None:   # every job has ended
+            self._claim.release()
         runs, unreadable = [], []
         for path in sorted(root.glob("*/run.json"), key=lambda p: (len(p.parent.name), p.parent.name)):
             try:
@@ -61,3 +88,9 @@ class SweepSummary(Callback):
                 or (1 if any(m.get("status") == "failed" for _, m in runs) or unreadable else 0))
         if code:
             sys.exit(code)
+
+
+def _refuse(reason: str) -> None:
+    """Bad input found before anything was written: one line, exit 2."""
+    print(f"error: {reason} (nothing was run or written)", file=sys.stderr, flush=True)
+    sys.exit(2)

@@ -19,7 +19,6 @@ import signal
 import subprocess
 import sys
 import time as wall
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -28,15 +27,16 @@ from omegaconf import DictConfig, OmegaConf
 from swarmbox import monitor
 from swarmbox.core.messages import GROUND_ID
 from swarmbox.hal.mavlink.signing import KEY_ENV
-from swarmbox.record.schema import SCHEMA_VERSION, node_name
-from swarmbox.run import build, mission, node_faults, vehicle_host
+from swarmbox.record.schema import node_name
+from swarmbox.run import build, claims, interrupt, mission, node_faults, record, vehicle_host
+from swarmbox.run.record import node_outcome, redact_overrides
 
-_PACKAGE_ROOT = Path(__file__).resolve().parents[2]
 #: The MAVLink 2 signing key of the vehicle links (``backend.signing_key``), handed to agent processes.
 MAVLINK_KEY_ENV = KEY_ENV   # the MAVLink signing key, handed to agents and vehicle hosts
-#: Config keys whose values never reach a file: the swarm key and the MAVLink signing key.
-SECRET_KEYS = frozenset({"key", "signing_key"})
 POLL_S = 0.2
+#: the run's status and reason from its nodes' outcomes (the rules of :mod:`swarmbox.run.record`)
+outcome = node_outcome
+redact = redact_overrides
 
 
 class LaunchError(RuntimeError):
@@ -46,12 +46,9 @@ class LaunchError(RuntimeError):
 free_ports = vehicle_host.free_ports   # TCP ports for the Zenoh endpoints
 
 
-def child_env() -> dict[str, str]:
-    """The environment of a process the launcher starts: this package first, no inherited keys."""
-    env = dict(os.environ)
-    env.pop(MAVLINK_KEY_ENV, None)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(_PACKAGE_ROOT), env.get("PYTHONPATH")]))
-    return env
+def child_env(keep: dict[str, str] | None = None, key_env: str | None = None) -> dict[str, str]:
+    """The environment of a process the launcher starts: this package first, only the keys in ``keep``."""
+    return record.child_env(keep, key_env)
 
 
 def _tail(path: Path) -> str:
@@ -116,10 +113,8 @@ class NodeSet:
         self.ids = [GROUND_ID, *drone_ids]
         self.procs: dict[int, subprocess.Popen[bytes]] = {}
         self.restarts: dict[int, int] = {}   # node -> pid of a process started again by someone else
-        from swarmbox.run.runner import _in_sweep
-
         # the live dashboard draws from the ground process: it gets this process's terminal (stderr)
-        self.dashboard = monitor.wanted(cfg.run.monitor, realtime=True, multirun=_in_sweep())
+        self.dashboard = monitor.wanted(cfg.run.monitor, realtime=True, multirun=record.in_sweep())
 
     def start(self, secrets_env: dict[str, str], vehicles: dict[str, dict[str, Any]]) -> None:
         self.nodes_dir.mkdir(parents=True, exist_ok=True)
@@ -127,14 +122,16 @@ class NodeSet:
         locators = {node_name(i): f"tcp/127.0.0.1:{p}" for i, p in zip(self.ids, ports, strict=True)}
         plan = {"mission_id": secrets.token_hex(6), "locators": locators, "vehicles": vehicles}
         (self.nodes_dir / "plan.json").write_text(json.dumps(plan, indent=2))
-        env = child_env()
-        env.update(secrets_env)
+        key_env = str(self.cfg.run.net.key_env)
+        # the swarm key for every node; the MAVLink key only for agents (they sign their vehicle's link)
+        ground_env = child_env({k: v for k, v in secrets_env.items() if k != MAVLINK_KEY_ENV}, key_env)
+        agent_env = child_env(secrets_env, key_env)
         for i in self.ids:
             role = ["ground"] if i == GROUND_ID else ["agent", "--drone", str(i)]
             with open(self.nodes_dir / f"{node_name(i)}.log", "wb") as out:
                 self.procs[i] = subprocess.Popen(
                     [sys.executable, "-m", "swarmbox.run.node", *role, "--run-dir", str(self.run_dir)],
-                    stdin=subprocess.DEVNULL, stdout=out, env=env,
+                    stdin=subprocess.DEVNULL, stdout=out, env=ground_env if i == GROUND_ID else agent_env,
                     stderr=None if i == GROUND_ID and self.dashboard else subprocess.STDOUT,
                     start_new_session=True)
         pids = {node_name(i): p.pid for i, p in self.procs.items()}
@@ -243,54 +240,23 @@ class NodeSet:
         return out
 
 
-def outcome(results: dict[str, dict[str, Any]]) -> tuple[str, str]:
-    """The run's status and reason: the ground's, plus what happened to the agents."""
-    g = results[node_name(GROUND_ID)]
-    status = g["status"] if g["status"] in ("ok", "aborted") else "failed"
-    parts = [g.get("reason", "")] if status != "ok" or g.get("reason") else []
-    if status == "failed" and g["status"] == "killed":
-        parts = [f"ground {g['reason']}"]
-    if g.get("lost_drones"):
-        parts.append(f"lost drones {g['lost_drones']}")
-    for name, r in results.items():
-        if name != node_name(GROUND_ID) and r["status"] in ("killed", "failed"):
-            parts.append(f"{name} {r['status']}: {r['reason']}")
-        elif r.get("first_exit"):
-            parts.append(f"{name} {r['first_exit']}, restarted: {r['status']}")
-    return status, "; ".join(p for p in parts if p)
-
-
-def redact(overrides: list[str]) -> list[str]:
-    """Command-line overrides with the value of every key setting hidden (``run.net.key=***``)."""
-    out = []
-    for o in overrides:
-        name, eq, _ = o.partition("=")
-        out.append(f"{name}=***" if eq and name.lstrip("+~").rsplit(".", 1)[-1] in SECRET_KEYS else o)
+def _keys(cfg: DictConfig) -> dict[str, str]:
+    """The keys the nodes need, by the environment variable that carries each to them."""
+    out = {str(cfg.run.net.key_env): cfg.run.net.key or os.environ.get(cfg.run.net.key_env)
+           or secrets.token_hex(32)}
+    signing = OmegaConf.select(cfg, "backend.signing_key", default=None)
+    if signing:
+        out[MAVLINK_KEY_ENV] = str(signing)
     return out
 
 
 def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: list[str]) -> dict[str, Any]:
     """Run ``cfg`` as one process per node; returns the manifest written as ``run.json``."""
-    from swarmbox.run.runner import RunExistsError, _git_sha, _versions, write_atomic
-
-    run_dir.mkdir(parents=True, exist_ok=True)
-    if (run_dir / "run.json").exists():
-        raise RunExistsError(f"{run_dir} already holds a finished run; refusing to overwrite it")
-    key = cfg.run.net.key or os.environ.get(cfg.run.net.key_env) or secrets.token_hex(32)
-    public = OmegaConf.to_container(cfg, resolve=True)
-    public["run"]["net"]["key"] = None          # the keys travel in the environment only
-    secrets_env = {cfg.run.net.key_env: key}
-    if isinstance(public.get("backend"), dict) and public["backend"].get("signing_key"):
-        secrets_env[MAVLINK_KEY_ENV] = str(public["backend"]["signing_key"])
-        public["backend"]["signing_key"] = None
-    write_atomic(run_dir / "config.yaml", OmegaConf.to_yaml(OmegaConf.create(public)))
-    manifest: dict[str, Any] = {
-        "schema": SCHEMA_VERSION, "status": "failed", "reason": "", "traceback": None, "runtime": "processes",
-        "seed": int(cfg.seed), "choices": choices, "overrides": redact(overrides), "sim_time_s": 0.0,
-        "wall_time_s": 0.0, "real_time_factor": None, "ticks": 0, "tick_s": 1.0 / cfg.run.tick_hz,
-        "n_drones": 0, "nodes": [], "clocks": build.clock_settings(cfg), "node_results": {},
-        "versions": _versions(), "git_sha": _git_sha(),
-        "started_at": datetime.now(UTC).isoformat(timespec="seconds")}
+    keys = _keys(cfg)
+    # the keys travel in the environment only
+    claim, run_json = claims.claim_run(cfg, run_dir, {*record.secret_values(cfg, overrides), *keys.values()})
+    manifest = record.new_manifest(cfg, choices, overrides, n_drones=0, nodes=[], runtime="processes",
+                                   node_results={})
     start = wall.time()
     sitl = nodes = None
     try:
@@ -302,15 +268,16 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         sitl, vehicles = autopilots(cfg, m, run_dir)
         if sitl is None:
             nodes.nodes_dir.mkdir(parents=True, exist_ok=True)
-            host_env = child_env()   # a signing autopilot holds the key its agents sign with
-            if MAVLINK_KEY_ENV in secrets_env:
-                host_env[MAVLINK_KEY_ENV] = secrets_env[MAVLINK_KEY_ENV]
+            # a vehicle holds the MAVLink key its agent signs with, never the swarm key
+            host_keys = {k: v for k, v in keys.items() if k == MAVLINK_KEY_ENV}
+            host_env = child_env(host_keys, str(cfg.run.net.key_env))
             sitl, vehicles = vehicle_host.start(cfg, m, run_dir, host_env)
-        nodes.start(secrets_env, vehicles)
-        nodes.wait_ready(float(cfg.run.net.ready_timeout_s))
-        start = nodes.go(float(cfg.run.net.start_delay_s))
-        nodes.wait_ground()
-        nodes.finish_agents(float(cfg.run.net.stop_timeout_s))
+        with interrupt.armed():   # Ctrl-C / SIGTERM: every node is stopped, the run is interrupted
+            nodes.start(keys, vehicles)
+            nodes.wait_ready(float(cfg.run.net.ready_timeout_s))
+            start = nodes.go(float(cfg.run.net.start_delay_s))
+            nodes.wait_ground()
+            nodes.finish_agents(float(cfg.run.net.stop_timeout_s))
         results = nodes.results()
         status, reason = outcome(results)
         g = results[node_name(GROUND_ID)]
@@ -318,19 +285,35 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
                         sim_time_s=g.get("sim_time_s", 0.0),
                         tasks_refused={k: r["tasks_refused"] for k, r in results.items()
                                        if r.get("tasks_refused")})
-    except KeyboardInterrupt:
-        manifest.update(status="aborted", reason="interrupted (Ctrl-C)")
+    except interrupt.RunInterrupted as exc:
+        manifest.update(status="interrupted", reason=str(exc))
+    except KeyboardInterrupt:   # no handler installed (programmatic use): record, then propagate
+        manifest.update(status="interrupted", reason="interrupted by SIGINT")
+        raise
     except Exception as exc:
         manifest.update(status="failed", reason=f"{type(exc).__name__}: {exc}")
     finally:
+        _finish(manifest, nodes, sitl, start, run_json)
+        claim.release()
+    return manifest
+
+
+def _finish(manifest: dict[str, Any], nodes: NodeSet | None, sitl: Any, start: float,
+            run_json: record.RunJson) -> None:
+    """Stop what still runs, then write run.json."""
+    try:
         if nodes is not None:
             nodes.stop()
             manifest["node_results"] = manifest["node_results"] or nodes.results()
+            g = manifest["node_results"].get(node_name(GROUND_ID), {})
+            if not manifest["ticks"]:   # stopped early: how far the ground got
+                manifest.update(ticks=g.get("ticks", 0), sim_time_s=g.get("sim_time_s", 0.0))
         if sitl is not None:
             sitl.stop()
             if getattr(sitl, "stats", None):
                 manifest["vehicle_host"] = sitl.stats
+            manifest["problems"] += list(getattr(sitl, "problems", []))
+    finally:
         elapsed = max(wall.time() - start, 1e-9)
         manifest.update(wall_time_s=elapsed, real_time_factor=manifest["sim_time_s"] / elapsed)
-        write_atomic(run_dir / "run.json", json.dumps(manifest, indent=2, sort_keys=True))
-    return manifest
+        run_json.write(manifest)

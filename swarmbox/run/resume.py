@@ -14,6 +14,8 @@ import os
 from pathlib import Path
 from typing import Any
 
+from swarmbox.run.record import redact_overrides
+
 FINISHED = ("ok", "aborted")
 _KEPT = ("run.json", "config.yaml", "logs")
 
@@ -36,10 +38,8 @@ def finished_run(run_dir: Path, overrides: list[str]) -> dict[str, Any] | None:
     except (OSError, ValueError):
         manifest = {"status": "unreadable"}
     if manifest.get("status") in FINISHED:
-        from swarmbox.run.runner import redacted
-
         recorded = _job_overrides(manifest.get("overrides") or [])
-        wanted = _job_overrides(redacted(overrides))   # recorded ones hide key values
+        wanted = _job_overrides(redact_overrides(overrides))   # recorded ones hide key values
         if recorded != wanted:
             raise ResumeMismatchError(
                 f"{run_dir} holds a finished run made with overrides {recorded}, not {wanted}; "

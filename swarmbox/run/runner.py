@@ -5,81 +5,38 @@ written — or, if only the build can detect it, after removing what the run had
 starts, whatever happens — success, abort, a crashing or hung user hook, a signal — the run
 directory ends up with ``run.json`` (status ``ok`` / ``aborted`` / ``failed`` / ``interrupted``,
 reason, traceback, simulated time and ticks reached), the resolved ``config.yaml`` and every log row
-written so far. Files are written atomically, and a directory that already holds a finished run is
-never written into.
+written so far. Files are written atomically; a directory that already holds a finished run, or that
+another process is writing into (:mod:`swarmbox.run.claims`), is never written into. The record's
+fields, status rules and redaction are :mod:`swarmbox.run.record`'s, shared with the processes
+runtime.
 """
 
 from __future__ import annotations
 
-import json
-import os
-import platform
 import shutil
-import subprocess
 import time
 import traceback
 from collections.abc import Callable
-from datetime import UTC, datetime
-from functools import cache
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
-from swarmbox import __version__
 from swarmbox import monitor as live_monitor
 from swarmbox.core.messages import GROUND_ID
+from swarmbox.core.rows import TEXTS
 from swarmbox.core.swarm import Swarm, gc_paused
 from swarmbox.faults import FaultConfigError, describe
-from swarmbox.record.schema import SCHEMA_VERSION, node_name
+from swarmbox.record.schema import node_name
 from swarmbox.record.writer import Recorder
-from swarmbox.run import build, checks, interrupt
-from swarmbox.run.build import ConfigError
+from swarmbox.run import build, checks, claims, interrupt, record
 from swarmbox.run.config import GROUPS
 from swarmbox.run.progress import RunProgress
+from swarmbox.run.record import RunExistsError, write_atomic
 from swarmbox.run.tally import SafetyTally
 from swarmbox.run.watchdog import HookTimeout, HookWatchdog
 
-_PROJECT_ROOT = Path(__file__).resolve().parents[2]
-
-
-class RunExistsError(FileExistsError):
-    pass
-
-
-def write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
-def _versions() -> dict[str, str]:
-    return dict(_package_versions())
-
-
-@cache
-def _package_versions() -> tuple[tuple[str, str], ...]:
-    """What this process runs on (read once: a sweep worker runs many jobs)."""
-    out = {"swarmbox": __version__, "python": platform.python_version()}
-    for pkg in ("numpy", "pymunk", "hydra-core", "omegaconf", "pyarrow", "pymavlink"):
-        try:
-            out[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            pass
-    return tuple(out.items())
-
-
-@cache
-def _git_sha() -> str | None:
-    """The checkout's commit when this process first asks: the code it imported (a sweep worker
-    would otherwise start a ``git`` process per job)."""
-    try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=_PROJECT_ROOT, capture_output=True,
-                             text=True, timeout=5, check=False)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return out.stdout.strip() or None
+__all__ = ["RunExistsError", "execute", "redacted", "run_choices", "summary_line", "write_atomic"]
 
 
 def run_choices(cfg: DictConfig, hydra_choices: Any) -> dict[str, str]:
@@ -109,26 +66,25 @@ def _watchdog(cfg: DictConfig, swarm: Swarm) -> HookWatchdog | None:
     return dog if dog.start() else None
 
 
-def _discard(run_dir: Path, existed: bool, logs_existed: bool) -> None:
-    """Remove what a run that never started created (its directory too, if the run made it).
-
-    Nothing was flushed before the first tick, so the recorder has no file open.
-    """
-    if not existed:
-        shutil.rmtree(run_dir, ignore_errors=True)
-        return
+def _discard(claim: claims.Claim, run_json: record.RunJson, logs_existed: bool) -> None:
+    """Remove what a run that never started created: its config, its reservation, its claim, and
+    its directory if the run made it. Nothing was flushed before the first tick."""
+    run_dir = claim.dir
     (run_dir / "config.yaml").unlink(missing_ok=True)
+    run_json.discard()
     if not logs_existed:
         shutil.rmtree(run_dir / "logs", ignore_errors=True)
+    claim.undo()
 
 
 def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: list[str],
             prepare: Callable[[Swarm], None] | None = None) -> dict[str, Any]:
     """Run one configuration into ``run_dir``; returns the manifest written as ``run.json``.
 
-    Raises :class:`RunExistsError` or one of :data:`~swarmbox.run.checks.INPUT_ERRORS` (leaving the
-    disk as it was) when the run cannot start. ``prepare(swarm)`` is called once the swarm is built,
-    before the first tick (programmatic use: schedule events with ``swarm.schedule``).
+    Raises :class:`RunExistsError` (the directory holds a finished run, or another process is
+    writing into it) or one of :data:`~swarmbox.run.checks.INPUT_ERRORS` (leaving the disk as it
+    was) when the run cannot start. ``prepare(swarm)`` is called once the swarm is built, before the
+    first tick (programmatic use: schedule events with ``swarm.schedule``).
     """
     _refuse_finished(run_dir)
     m = checks.check(cfg)
@@ -139,30 +95,16 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         return processes.execute(cfg, run_dir, choices, overrides)
     if cfg.mission.file:   # record the file's own mission, not the group it was loaded over
         choices = {**choices, "mission": m.name}
-    existed = run_dir.exists()
     logs_existed = (run_dir / "logs").exists()
-    try:
-        run_dir.mkdir(parents=True, exist_ok=True)
-        write_atomic(run_dir / "config.yaml", _public_yaml(cfg))
-    except OSError as exc:
-        if run_dir.is_dir():
-            _discard(run_dir, existed, logs_existed)
-        raise ConfigError(f"run directory {run_dir} (run.out_dir / hydra.run.dir) cannot be written: "
-                          f"{exc.strerror or exc}") from None
-    manifest: dict[str, Any] = {
-        "schema": SCHEMA_VERSION, "status": "failed", "reason": "", "traceback": None,
-        "seed": int(cfg.seed), "choices": choices, "overrides": redacted(overrides),
-        "sim_time_s": 0.0, "wall_time_s": 0.0, "real_time_factor": None, "ticks": 0,
-        "tick_s": 1.0 / cfg.run.tick_hz, "n_drones": m.swarm_size,
-        "nodes": [node_name(i) for i in [GROUND_ID, *m.drone_ids]], "clocks": build.clock_settings(cfg),
-        "versions": _versions(), "git_sha": _git_sha(),
-        "started_at": datetime.now(UTC).isoformat(timespec="seconds"),
-    }
+    secrets = record.secret_values(cfg, overrides)
+    claim, run_json = claims.claim_run(cfg, run_dir, secrets)
+    manifest = record.new_manifest(cfg, choices, overrides, n_drones=m.swarm_size,
+                                   nodes=[node_name(i) for i in [GROUND_ID, *m.drone_ids]])
     recorder = Recorder(run_dir, writer=log_writer(cfg))
-    swarm = progress = monitor = None
-    dog = None
+    swarm = progress = monitor = dog = None
     discard = False
     started = time.perf_counter()
+    refused_texts = TEXTS.overflowed
     try:
         with interrupt.armed():
             try:
@@ -170,7 +112,7 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
                 swarm = build.build_swarm(cfg, m, monitor.tap(recorder) if monitor else recorder)
             except checks.INPUT_ERRORS:   # found only while building (a fault the backend cannot express)
                 discard = True
-                _discard(run_dir, existed, logs_existed)
+                _discard(claim, run_json, logs_existed)
                 raise
             if prepare is not None:
                 prepare(swarm)
@@ -210,20 +152,31 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         manifest.update(status="failed", reason=f"{type(exc).__name__}: {exc}",
                         traceback=traceback.format_exc())
     finally:
-        if dog is not None:
-            dog.stop()
-        if progress is not None:
-            progress.close()
-        if monitor is not None:
-            try:
-                manifest["monitor"] = monitor.stop(swarm)
-            except Exception as exc:  # noqa: BLE001 - watching must never cost the run its logs
-                manifest["monitor"] = {"error": f"{type(exc).__name__}: {exc}"}
+        _stop_watchers(manifest, dog, progress, monitor, swarm)
         if manifest["status"] in ("failed", "interrupted"):
             _reached(manifest, swarm, started)
+        if TEXTS.overflowed > refused_texts:
+            manifest["problems"].append(
+                f"{TEXTS.overflowed - refused_texts} texts logged as {TEXTS.OVERFLOW!r}: the text table "
+                f"holds {TEXTS.limit} texts")
         if not discard:
-            _close(manifest, swarm, recorder, run_dir)
+            try:
+                _close(manifest, swarm, recorder, run_json)
+            finally:
+                claim.release()
     return manifest
+
+
+def _stop_watchers(manifest: dict[str, Any], dog: Any, progress: Any, monitor: Any, swarm: Any) -> None:
+    if dog is not None:
+        dog.stop()
+    if progress is not None:
+        progress.close()
+    if monitor is not None:
+        try:
+            manifest["monitor"] = monitor.stop(swarm)
+        except Exception as exc:  # noqa: BLE001 - watching must never cost the run its logs
+            manifest["monitor"] = {"error": f"{type(exc).__name__}: {exc}"}
 
 
 def _t(swarm: Swarm | None) -> float:
@@ -239,27 +192,31 @@ def _reached(manifest: dict[str, Any], swarm: Swarm | None, started: float) -> N
                         real_time_factor=swarm.time.t_s / wall_s if wall_s > 0 else None)
 
 
-def _close(manifest: dict[str, Any], swarm: Swarm | None, recorder: Recorder, run_dir: Path) -> None:
+def _close(manifest: dict[str, Any], swarm: Swarm | None, recorder: Recorder, run_json: record.RunJson,
+           ) -> None:
     """Stop the backend, finish every log file, then write run.json (last: it marks the run finished)."""
     try:
         if swarm is not None:
             swarm.backend.close()
+            manifest["problems"] += list(getattr(swarm.backend, "problems", []))
     except Exception as exc:  # noqa: BLE001 - recorded; the logs must still be closed
-        manifest.update(reason=f"{manifest['reason']}; backend close: {exc}".strip("; "))
+        record.add_reason(manifest, f"backend close: {exc}")
     finally:
         try:
             with gc_paused():
                 recorder.close()
         except OSError as exc:
-            manifest.update(status="failed", reason=f"{manifest['reason']}; {exc}".strip("; "))
+            record.add_reason(manifest, str(exc), fail=True)
+        if recorder.not_written:
+            manifest["tables_not_written"] = recorder.not_written
         manifest["log_writer"] = recorder.writer   # where the rows were encoded, in the end
-        write_atomic(run_dir / "run.json", json.dumps(manifest, indent=2, sort_keys=True))
+        run_json.write(manifest)
 
 
 def _monitor(cfg: DictConfig, title: str):
     """The live dashboard of this run, or None (see :mod:`swarmbox.monitor`)."""
     realtime = bool(getattr(build.backend_class(cfg.backend), "realtime", False))
-    dashboard = live_monitor.wanted(cfg.run.monitor, realtime=realtime, multirun=_in_sweep())
+    dashboard = live_monitor.wanted(cfg.run.monitor, realtime=realtime, multirun=record.in_sweep())
     if not dashboard and not cfg.run.rerun:
         return None
     return live_monitor.create(title, cfg.run.monitor_hz, dashboard=dashboard, rerun=cfg.run.rerun)
@@ -271,13 +228,6 @@ def log_writer(cfg: DictConfig) -> str:
     and lost 10 % at 36, alone or beside the other runs of a sweep (docs/performance.md)."""
     mode = str(cfg.run.log_writer)
     return "thread" if mode == "auto" else mode
-
-
-def _in_sweep() -> bool:
-    from hydra.core.hydra_config import HydraConfig
-    from hydra.types import RunMode
-
-    return HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
 
 
 def summary_line(manifest: dict[str, Any], run_dir: Path) -> str:
@@ -292,18 +242,6 @@ def summary_line(manifest: dict[str, Any], run_dir: Path) -> str:
             f"({rtf:.0f}x real time){tail}  [{run_dir}]")
 
 
-def _public_yaml(cfg: DictConfig) -> str:
-    """The resolved config as written to ``config.yaml``: a MAVLink signing key is never written."""
-    if not OmegaConf.select(cfg, "backend.signing_key", default=None):
-        return OmegaConf.to_yaml(cfg, resolve=True)
-    public = OmegaConf.to_container(cfg, resolve=True)
-    public["backend"]["signing_key"] = None   # type: ignore[index]
-    return OmegaConf.to_yaml(OmegaConf.create(public))
-
-
 def redacted(overrides: list[str]) -> list[str]:
-    """``overrides`` with the value of every key setting hidden (``backend.signing_key=***``)."""
-    if not any("key=" in o for o in overrides):
-        return overrides
-    from swarmbox.run.processes import redact
-    return redact(overrides)
+    """``overrides`` with the value of every secret hidden (``backend.signing_key=***``)."""
+    return record.redact_overrides(overrides)

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from swarmbox.run.record import redact_overrides, scrub_error
+
 _state: dict[str, list] = {"entered": [], "not_started": [], "invalid": []}
 _on_enter: list[Callable[[], None]] = []
 
@@ -27,11 +29,12 @@ def any_entered() -> bool:
 
 
 def not_started(overrides: list[str]) -> None:
-    _state["not_started"].append(" ".join(overrides))
+    _state["not_started"].append(" ".join(redact_overrides(overrides)))
 
 
 def invalid(overrides: list[str], reason: str) -> None:
-    _state["invalid"].append((" ".join(overrides), reason))
+    """A job refused as bad input (its overrides and the reason, keys hidden: both reach sweep.json)."""
+    _state["invalid"].append((" ".join(redact_overrides(overrides)), scrub_error(reason, overrides)))
 
 
 def jobs_not_started() -> list[str]:

@@ -33,7 +33,8 @@ def test_analyze_run_writes_tables_and_figures(make_run, capsys):
     assert "mission_duration_s" in out and "disc_n_m" in out
     metrics = pd.read_csv(run / "tables" / "metrics.csv").set_index("metric")
     assert metrics.loc["mission_duration_s", "value"] == pytest.approx(15.0)
-    for name in ("drones", "links", "clocks", "diagnosis", "anomalies", "timeline", "problems"):
+    for name in ("drones", "links", "clocks", "finding", "alarms", "scoring", "anomalies", "timeline",
+                 "problems"):
         assert (run / "tables" / f"{name}.csv").is_file()
     for name in ("trajectories", "timeline_disc_n_m", "timeline_latency_ms", "comm_graph"):
         for ext in ("png", "svg"):

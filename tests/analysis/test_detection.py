@@ -13,7 +13,7 @@ from swarmbox.analysis import detection
 def rows_for(scale: float, detected: dict[float, int], false_alarms: int, runs: int = 10) -> list[dict]:
     """``runs`` faulty runs per magnitude (the first ``detected[m]`` detected) and one healthy run
     of 2 drone-hours with ``false_alarms``."""
-    base = {"detector": "swarmbox", "rule": "tukey", "threshold_scale": scale, "persist_ticks": 4,
+    base = {"detector": "swarmbox", "rule": "tukey", "threshold_scale": scale, "persist_s": 0.1,
             "n_drones": 9, "network": "ideal"}
     out = [{**base, "run": f"h{scale}", "fault": "none", "magnitude": np.nan, "false_alarms": false_alarms,
             "healthy_drone_h": 2.0, "detected": np.nan, "localized": np.nan, "t_f_s": np.nan,

@@ -1,8 +1,10 @@
-"""The message flow equals the former pandas merge, row for row, on runs with loss and latency and on
-messy hand-made logs.
+"""The message flow equals a plain pandas computation, row for row, on runs with loss and latency and
+on messy hand-made logs.
 
-``reference_flow`` is the pandas implementation the analyzer used before the matching moved to arrays,
-kept here verbatim as the oracle.
+``reference_flow`` is the pandas merge the analyzer used before the matching moved to arrays, with the
+time rule written out per send: a receive (or drop) belongs to a send of its (msg_id, dst) only from
+``SLACK_S`` before the send until ``SLACK_S`` before the next later send with the same key, and at
+most ``max_latency_s`` after it.
 """
 
 from __future__ import annotations
@@ -16,23 +18,43 @@ from swarmbox.analysis.load import NET, load_run
 from swarmbox.analysis.unify import T, unify
 
 _LAT = "latency_ms"
+KEY = ["msg_id", "dst"]
 
 
-def reference_flow(messages: pd.DataFrame, tick_s: float = 0.0) -> pd.DataFrame:
+def _in_window(sends: pd.DataFrame, events: pd.DataFrame, max_latency_s: float) -> pd.DataFrame:
+    """Every (send, event) pair of the same key where the event is in the send's window (a send with no
+    time: every event of its key), with the send's row number ``row``."""
+    def later(t: pd.Series) -> list[float]:
+        return [min((u for u in t if u > x), default=np.inf) for x in t]
+    nxt = sends.groupby(KEY)["t_send"].transform(later) if len(sends) else sends["t_send"]
+    pairs = sends.assign(row=np.arange(len(sends)), nxt=nxt.to_numpy()).merge(events, on=KEY)
+    slack = flow.SLACK_S
+    inside = ((pairs["t_e"] >= pairs["t_send"] - slack) & (pairs["t_e"] < pairs["nxt"] - slack)
+              & (pairs["t_e"] - pairs["t_send"] <= max_latency_s))
+    return pairs[inside | pairs["t_send"].isna()]
+
+
+def reference_flow(messages: pd.DataFrame, tick_s: float = 0.0,
+                   max_latency_s: float = np.inf) -> pd.DataFrame:
     sends = messages[messages["kind"] == "send"]
     out = pd.DataFrame({
         "msg_id": sends["msg_id"].astype("int64"), "type": sends["type"].astype("str"),
         "src": sends["src"].astype("int64"), "dst": sends["dst"].astype("int64"),
         "nbytes": sends["nbytes"].astype("float64"), "t_send": sends[T],
     })
-    recvs = messages[messages["kind"] == "recv"]
+    recvs = messages[(messages["kind"] == "recv") & messages[T].notna()]
     recvs = pd.DataFrame({"msg_id": recvs["msg_id"].astype("int64"), "dst": recvs["node"].astype("int64"),
-                          "t_recv": recvs[T]})
-    recvs = recvs.sort_values("t_recv").drop_duplicates(["msg_id", "dst"])
+                          "t_e": recvs[T]})
+    got = _in_window(out, recvs, max_latency_s).groupby("row")["t_e"].min()
     drops = messages[messages["kind"] == "drop"]
     drops = pd.DataFrame({"msg_id": drops["msg_id"].astype("int64"), "dst": drops["dst"].astype("int64"),
-                          "drop_reason": drops["reason"].astype("str")}).drop_duplicates(["msg_id", "dst"])
-    out = out.merge(recvs, on=["msg_id", "dst"], how="left").merge(drops, on=["msg_id", "dst"], how="left")
+                          "drop_reason": drops["reason"].astype("str"), "t_e": drops[T],
+                          "logged": np.arange(len(drops))})
+    dropped = _in_window(out, drops, max_latency_s).sort_values(["t_e", "logged"]).groupby("row").first()
+    rows = pd.RangeIndex(len(out))
+    out["t_recv"] = got.reindex(rows).to_numpy()
+    reason = dropped["drop_reason"].reindex(rows).to_numpy()
+    out["drop_reason"] = pd.Series(reason, index=out.index, dtype="str")
     out[_LAT] = (out["t_recv"] - out["t_send"]) * 1e3
     out["delivered"] = out["t_recv"].notna()
     logged = set(messages.loc[messages["node"] != NET, "node"].astype("int64").unique())
@@ -189,3 +211,50 @@ def test_a_table_without_type_gives_the_flow_without_it(seed):
     full = flow.message_flow(msgs, 0.025)
     got = flow.message_flow(msgs.drop(columns="type"), 0.025)
     pd.testing.assert_frame_equal(got, full.drop(columns="type"), check_exact=True)
+
+
+def _two_lives() -> pd.DataFrame:
+    """Drone 1 reports to the ground, ids 0..9 from 1 s; it restarts and numbers 0..9 again from 20 s.
+    Every report arrives 2 ms later except id 3 of the second life; id 50, sent at 30 s, is logged as
+    received 5 s later; the ground's last message at 40 s ends the run."""
+    rows = []
+    for life, start in enumerate((1.0, 20.0)):
+        for k in range(10):
+            t = start + 0.1 * k
+            rows.append(("send", k, 1, -1, t))
+            if (life, k) != (1, 3):
+                rows.append(("recv", k, -1, -1, t + 0.002))
+    rows += [("send", 50, 1, -1, 30.0), ("recv", 50, -1, -1, 35.0), ("send", 900, -1, 1, 40.0),
+             ("recv", 900, 1, 1, 40.001)]
+    msgs = pd.DataFrame([{"kind": k, "msg_id": m, "node": n, "dst": d, T: t, "type": "report",
+                          "src": 1 if d == -1 else -1, "nbytes": 10, "reason": ""} for k, m, n, d, t in rows])
+    msgs["node"] = msgs["node"].astype("int16")
+    return msgs
+
+
+def test_a_restarted_node_s_repeated_ids_match_by_time():
+    """A receive matches only a send before it: the report lost after the restart comes out lost (the old
+    key-only match gave it the first life's arrival, -18,998 ms), and no latency is negative."""
+    msgs = _two_lives()
+    got = flow.message_flow(msgs, 0.025, max_latency_s=2.0)
+    pd.testing.assert_frame_equal(got, reference_flow(msgs, 0.025, max_latency_s=2.0), check_exact=True)
+    reports = got[got["msg_id"] < 50]
+    assert len(reports) == 20 and reports["counted"].all()
+    lost = reports[reports["lost"]]
+    assert lost[["msg_id", "t_send"]].values.tolist() == [[3, pytest.approx(20.3)]]
+    delivered = reports[reports["delivered"]]
+    assert len(delivered) == 19 and np.allclose(delivered[_LAT], 2.0)
+    late = got.set_index("msg_id").loc[50]
+    assert late["lost"] and not late["delivered"]            # 5 s: beyond the 2 s bound, not its receive
+    assert flow.message_flow(msgs, 0.025).set_index("msg_id").loc[50, "delivered"]   # no bound: matched
+    assert (got[_LAT].dropna() >= 0).all()
+
+
+def test_a_receive_before_its_send_is_not_its_receive():
+    rows = [("send", 1, 0, 1, 1.0), ("recv", 1, 1, 1, 0.5), ("send", 2, 0, 1, 1.0), ("recv", 2, 1, 1, 0.998)]
+    msgs = pd.DataFrame([{"kind": k, "msg_id": m, "node": n, "dst": d, T: t, "type": "report", "src": 0,
+                          "nbytes": 10, "reason": ""} for k, m, n, d, t in rows])
+    msgs["node"] = msgs["node"].astype("int16")
+    got = flow.message_flow(msgs, 0.0).set_index("msg_id")
+    assert not got.loc[1, "delivered"]                         # half a second before: another send's
+    assert got.loc[2, "delivered"] and got.loc[2, _LAT] == pytest.approx(-2.0)   # within the slack

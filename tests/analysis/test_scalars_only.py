@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from swarmbox.analysis.identity import run_identity
 from swarmbox.analysis.load import load_run
 from swarmbox.analysis.report import ANALYZED_COLUMNS, AnalysisOptions, RunAnalysis, analyze_run
 from swarmbox.analysis.sweep import _analyze_one
@@ -38,7 +39,9 @@ def _both(run_dir: Path) -> tuple[RunAnalysis, RunAnalysis]:
     assert full.directions == only.directions and full.problems == only.problems
     row = _analyze_one(run_dir, run_dir.parent, AnalysisOptions())["row"]
     _same({key: row[key] for key in full.scalars}, full.scalars)
-    assert len(row) == len(full.scalars) + 3 + len(full.run.manifest["choices"])   # run, status, seed
+    identity = run_identity(full.run.manifest)          # choices and the other overrides
+    assert len(row) == len(full.scalars) + 3 + len(identity)   # run, status, seed
+    assert {k: row[k] for k in identity} == identity
     return full, only
 
 

@@ -81,31 +81,56 @@ def test_bootstrap_is_seeded_per_cell():
     assert np.isnan(sweep.bootstrap_ci(values[:1], sweep._rng(0, "g"), 10, 0.95)).all()
 
 
-def test_bad_runs_are_reported_and_skipped(sweep_dir, tmp_path):
+def test_bad_runs_are_reported_skipped_and_counted(sweep_dir, tmp_path):
     root = tmp_path / "sweep"
     shutil.copytree(sweep_dir, root)
+    fast = json.loads((root / "0" / "run.json").read_text())       # algo fast, seed 0
     failed = root / "failed"
     failed.mkdir()
-    (failed / "run.json").write_text(json.dumps({"status": "failed", "reason": "boom", "choices": {}}))
-    build_run(root / "partial", Scenario(skip_files=("drone_2/state",), choices={"algo": "fast"}))
+    (failed / "run.json").write_text(json.dumps(fast | {"status": "failed", "reason": "boom", "seed": 7}))
+    build_run(root / "partial", Scenario(skip_files=("drone_2/state",), seed=8,
+                                         choices={"algo": "fast", "mission": "synthetic"}))
     (root / "garbled").mkdir()
     (root / "garbled" / "run.json").write_text("{")
     (root / "killed" / "logs" / "drone_0").mkdir(parents=True)           # killed: no run.json
     (root / "killed" / "logs" / "drone_0" / "state.parquet.partial").write_bytes(b"PAR1")
-    aborted = json.loads((root / "0" / "run.json").read_text()) | {"status": "aborted", "seed": 9}
-    build_run(root / "aborted", Scenario(ticks=400, seed=9, choices={"algo": "fast"}))
-    (root / "aborted" / "run.json").write_text(json.dumps(aborted))
+    build_run(root / "aborted", Scenario(ticks=400, seed=9, choices={"algo": "fast", "mission": "synthetic"}))
+    (root / "aborted" / "run.json").write_text(json.dumps(fast | {"status": "aborted", "seed": 9}))
     res = analyze_sweep(root, OPTS)
     skipped = res.problems[res.problems["severity"] == "skipped"]
     assert sorted(skipped["run"]) == ["failed", "garbled", "killed", "partial"]
     assert "no run.json" in skipped.set_index("run").loc["killed", "problem"]
     assert "boom" in skipped.set_index("run").loc["failed", "problem"]
-    assert len(res.runs) == 11 and (res.runs["status"] == "aborted").sum() == 1
-    fast = res.summary.set_index(["algo", "metric"]).loc[("fast", "mission_duration_s")]
-    assert fast["n"] == 5   # the aborted run is listed but not summarized
+    assert len(res.runs) == 13 and (res.runs["status"] == "aborted").sum() == 1   # garbled, killed: no row
+    s = res.summary.set_index(["algo", "metric"])
+    counts = {m: s.loc[("fast", m), "mean"] for m in ("runs_attempted", "runs_ok", "runs_aborted",
+                                                      "runs_failed", "runs_interrupted", "success_rate")}
+    assert counts == {"runs_attempted": 8, "runs_ok": 6, "runs_aborted": 1, "runs_failed": 1,
+                      "runs_interrupted": 0, "success_rate": 6 / 8}
+    duration = s.loc[("fast", "mission_duration_s")]
+    assert duration["n"] == 5 and duration["n_runs"] == 8   # aborted, failed, partial: no value
+    assert "3 of 8 runs without a value" in duration["note"]
+    assert s.loc[("slow", "success_rate"), "mean"] == 1.0
 
 
-def test_group_by_unknown_column_is_reported(sweep_dir):
-    res = analyze_sweep(sweep_dir, SweepOptions(group_by=("planner",), n_boot=10))
-    assert res.summary.empty
-    assert res.problems["problem"].str.contains("planner").any()
+def test_group_by_unknown_column_is_refused(sweep_dir):
+    with pytest.raises(sweep.SweepInputError, match="planner"):
+        analyze_sweep(sweep_dir, SweepOptions(group_by=("planner",), n_boot=10))
+
+
+def test_an_abort_never_enters_a_mission_window_metric(sweep_dir, tmp_path):
+    """Even when aborted runs are asked for, their shortened mission window is not a fast mission."""
+    root = tmp_path / "sweep"
+    shutil.copytree(sweep_dir, root)
+    fast = json.loads((root / "0" / "run.json").read_text())
+    short = Scenario(ticks=400, seed=9, ground_stages={1: 0, 2: 20, 3: 40, 4: 60, 5: 390},
+                     choices={"algo": "fast", "mission": "synthetic"})     # EXECUTION 0.5 s: an early end
+    build_run(root / "aborted", short)
+    (root / "aborted" / "run.json").write_text(json.dumps(fast | {"status": "aborted", "seed": 9}))
+    s = analyze_sweep(root, SweepOptions(statuses=("ok", "aborted"), n_boot=50)).summary
+    s = s.set_index(["algo", "metric"])
+    assert s.loc[("fast", "mission_duration_s"), "n"] == 5          # the aborted run is not in it
+    assert s.loc[("fast", "mission_duration_s"), "mean"] == pytest.approx(np.mean(
+        [(300 + 8 * seed - 40) * 0.025 for seed in range(5)]))
+    assert s.loc[("fast", "min_separation_m"), "n"] == 6            # asked for: other metrics include it
+    assert s.loc[("fast", "runs_aborted"), "mean"] == 1 and s.loc[("fast", "success_rate"), "mean"] == 5 / 6

@@ -7,6 +7,7 @@ import time
 import pyarrow.parquet as pq
 import pytest
 
+from swarmbox.record.spill import SpillFile
 from swarmbox.record.writer import Recorder
 from tests.conftest import run_config
 
@@ -35,7 +36,11 @@ def test_a_run_logs_the_same_tables_whichever_writer_encodes_them(tmp_path, monk
         assert other.to_pandas().equals(table.to_pandas()), name   # NaN where NaN
 
 
-def test_a_writer_process_that_dies_fails_the_close_naming_it(tmp_path):
+def _stages(run_dir):
+    return pq.read_table(run_dir / "logs" / "drone_0" / "stages.parquet").column("tick").to_pylist()
+
+
+def test_a_writer_process_that_dies_fails_the_close_naming_it_and_the_tails_are_still_written(tmp_path):
     rec = Recorder(tmp_path, flush_rows=5, writer="process")
     append = rec.node(0).appender("stages")
     for tick in range(10):
@@ -44,13 +49,16 @@ def test_a_writer_process_that_dies_fails_the_close_naming_it(tmp_path):
     rec._handover.finish()   # the first chunk was sent: the process is up
     rec._process._proc.kill()
     rec._process._proc.wait()
-    with pytest.raises(OSError, match="log writer process"):
+    for tick in range(10, 14):   # buffered when the run ends: written by the run's own process
+        append((tick * 0.025, tick, 1, "ICEBREAK", ""))
+    with pytest.raises(OSError, match="log writer process failed"):
         rec.close()
+    assert _stages(tmp_path) == [10, 11, 12, 13]
 
 
-def test_a_chunk_sent_to_a_dead_writer_process_is_named(tmp_path):
-    """A hand-over after the process died: the background thread records which rows it could not
-    send (and does not die itself), and the close reports them."""
+def test_a_chunk_sent_to_a_dead_writer_process_goes_to_the_thread_and_the_loss_is_named(tmp_path):
+    """A hand-over after the process died: the rows the process had taken are lost (and said so),
+    the later ones are written by the run's own process."""
     rec = Recorder(tmp_path, flush_rows=5, writer="process")
     append = rec.node(0).appender("stages")
     for tick in range(10):
@@ -64,10 +72,33 @@ def test_a_chunk_sent_to_a_dead_writer_process_is_named(tmp_path):
     for tick in range(10, 20):
         append((tick * 0.025, tick, 1, "ICEBREAK", ""))
     rec.flush()
-    rec._handover.finish()
-    assert rec._handover.errors and "stages rows of nodes [0]" in rec._handover.errors[0]
-    with pytest.raises(OSError, match="log writer failed: stages rows of nodes \\[0\\]"):
+    for tick in range(20, 23):
+        append((tick * 0.025, tick, 1, "ICEBREAK", ""))
+    with pytest.raises(OSError, match="log writer process gone .*the rows it had taken are lost"):
         rec.close()
+    assert rec.writer.startswith("process, then thread")
+    assert _stages(tmp_path) == list(range(10, 23))
+
+
+def test_a_writer_process_that_cannot_start_leaves_every_hand_over_to_the_thread(tmp_path, monkeypatch):
+    """Past the hold size the thread's own hand-overs are encoded batches for the spill file: the
+    one sink takes both kinds (it once took only chunks, and these rows were lost)."""
+    monkeypatch.setattr("sys.executable", str(tmp_path / "no-such-python"))
+    monkeypatch.setattr(SpillFile, "HOLD_BYTES", 0)   # every hand-over goes to the spill file
+    rec = Recorder(tmp_path, flush_rows=5, writer="process")
+    append = rec.node(0).appender("stages")
+    for tick in range(5):
+        append((tick * 0.025, tick, 1, "ICEBREAK", ""))
+    rec.flush()
+    deadline = time.monotonic() + 30
+    while not rec.writer.startswith("thread (writer process unavailable"):   # it failed to start
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    for tick in range(5, 40):   # hand-overs encoded on this thread from now on
+        append((tick * 0.025, tick, 1, "ICEBREAK", ""))
+        rec.maybe_flush()
+    rec.close()
+    assert _stages(tmp_path) == list(range(40))
 
 
 def test_a_short_run_never_starts_the_process(tmp_path):

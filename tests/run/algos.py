@@ -86,3 +86,33 @@ class SlowDrone(DroneAlgorithm):
 
     def exec_complete(self, ctx):
         return ctx.stage_time_s > ctx.params.get("hover_s", 5.0)
+
+
+class OneCrashingDrone(DroneAlgorithm):
+    """Drone 1 raises 1 s into EXECUTION; the others hover ``params.hover_s`` and complete."""
+
+    def exec_loop(self, ctx):
+        if ctx.id == 1 and ctx.stage_time_s > 1.0:
+            raise ZeroDivisionError("deliberate failure in drone 1's exec_loop")
+        n, e, _ = ctx.home_ned_m
+        return Setpoint.position(n, e, -2.0)
+
+    def exec_complete(self, ctx):
+        return ctx.stage_time_s > ctx.params.get("hover_s", 5.0)
+
+
+class WaitingDrone(DroneAlgorithm):
+    """Holds its first exec_loop until the file ``params.flag`` exists (a run kept in flight while a
+    test does something beside it; needs ``run.hook_timeout_s=null``), then hovers ``hover_s``."""
+
+    def exec_loop(self, ctx):
+        import time
+        from pathlib import Path
+
+        while not Path(ctx.params["flag"]).exists():
+            time.sleep(0.05)
+        n, e, _ = ctx.home_ned_m
+        return Setpoint.position(n, e, -2.0)
+
+    def exec_complete(self, ctx):
+        return ctx.stage_time_s > ctx.params.get("hover_s", 5.0)

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from swarmbox.hal.launch import ProcessSet
+from swarmbox.hal.launch import ProcessSet, without_keys
 from swarmbox.hal.mavlink.frames import GeoFrame
 from swarmbox.hal.mavlink.signing import KEY_ENV
 from swarmbox.hal.px4.backend import BootClock, Px4Backend
@@ -95,7 +95,7 @@ class MavsimLauncher(ProcessSet):
 
     def start(self, local_ports: list[int]) -> None:
         self.log_dir.mkdir(parents=True, exist_ok=True)
-        env = dict(os.environ)
+        env = without_keys(os.environ)
         if self.signing_key:
             env[KEY_ENV] = str(self.signing_key)
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(_PACKAGE_ROOT), env.get("PYTHONPATH")]))
@@ -127,10 +127,11 @@ class MavsimLauncher(ProcessSet):
                 proc.kill()
                 proc.wait(timeout=STOP_TIMEOUT_S)
 
-    def collect(self, run_dir: Path | None, clocks: list[BootClock]) -> None:
+    def collect(self, run_dir: Path | None, clocks: list[BootClock]) -> list[str]:
         """mavsim keeps no flight log of its own; its console output stays in ``mavsim/``."""
         if self._own_dir:
             shutil.rmtree(self.log_dir, ignore_errors=True)
+        return []
 
 
 def _refusals(refuse: Mapping[Any, Sequence[str]], n: int) -> dict[str, tuple[str, ...]]:

@@ -62,8 +62,8 @@ class Launcher(Protocol):
     def stop(self) -> None:
         """Stop every vehicle (idempotent)."""
 
-    def collect(self, run_dir: Path | None, clocks: list[BootClock]) -> None:
-        """After :meth:`stop`: gather the vehicles' own logs into ``run_dir``."""
+    def collect(self, run_dir: Path | None, clocks: list[BootClock]) -> list[str] | None:
+        """After :meth:`stop`: gather the vehicles' own logs into ``run_dir``; what could not be."""
 
 
 class Px4Backend:
@@ -91,6 +91,7 @@ class Px4Backend:
         self._clock_s = self.t0_s = 0.0
         self._events: list[VehicleEvent] = []
         self._links: list[VehicleLink] = []
+        self.problems: list[str] = []   # what went wrong that did not fail the run (run.json ``problems``)
         self.vehicles: list[Px4Vehicle] = []
         self._closed, self._k = False, 0
         self.launcher: Launcher | None = self._make_launcher(homes)  # type: ignore[arg-type]
@@ -205,10 +206,12 @@ class Px4Backend:
     def _collect_logs(self, launcher: Launcher) -> None:
         """The vehicles' own logs into the run directory; a failure here must not fail the run."""
         try:
-            launcher.collect(self.run_dir, [self.boot_clock(i) for i in range(len(self.homes))])
+            clocks = [self.boot_clock(i) for i in range(len(self.homes))]
+            self.problems += launcher.collect(self.run_dir, clocks) or []
         except Exception as exc:   # a corrupt log: report it and keep the run's result
-            print(f"px4 backend: could not collect the vehicles' logs: {type(exc).__name__}: {exc}",
-                  file=sys.stderr)
+            self.problems.append(f"could not collect the vehicles' logs: {type(exc).__name__}: {exc}")
+        for problem in self.problems:
+            print(f"px4 backend: {problem}", file=sys.stderr)
 
     def inject_failure(self, i: int, unit: str, kind: str, instance: int = 0) -> None:
         """Vehicle ``i``'s autopilot fails ``unit`` itself (MAV_CMD_INJECT_FAILURE; ``kind="ok"``

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from swarmbox.hal.launch import ProcessSet
+from swarmbox.hal.launch import ProcessSet, without_keys
 from swarmbox.hal.mavlink.frames import GeoFrame
 from swarmbox.hal.px4.params import BootClock, Px4Params
 from swarmbox.hal.safety import SafetyLimits, px4_geofence
@@ -198,7 +198,8 @@ class SitlLauncher(ProcessSet):
             wd = self.instance_dir(i)
             wd.mkdir(parents=True, exist_ok=True)
             fence = None if self.limits is None else px4_geofence(self.limits, home)
-            env = instance_env(self.frame.geodetic_of(home), self.options, self.speed, os.environ, fence)
+            env = instance_env(self.frame.geodetic_of(home), self.options, self.speed,
+                               without_keys(os.environ), fence)
             cmd = [str(self.binary), "-i", str(self.instance(i)), "-d", str(self.build / "etc")]
             with open(wd / "out.log", "wb") as out, open(wd / "err.log", "wb") as err:
                 self.procs.append(subprocess.Popen(cmd, cwd=wd, env=env, stdin=subprocess.DEVNULL, stdout=out,
@@ -230,16 +231,24 @@ class SitlLauncher(ProcessSet):
                 proc.kill()
                 proc.wait(timeout=5.0)
 
-    def collect(self, run_dir: Path | None, clocks: list[BootClock]) -> None:
-        """Index each instance's ULogs with its clock and home in ``logs/drone_<i>/ulog.json``."""
+    def collect(self, run_dir: Path | None, clocks: list[BootClock]) -> list[str]:
+        """Index each instance's ULogs with its clock and home in ``logs/drone_<i>/ulog.json``;
+        returns what could not be collected, per drone (the run records it in ``problems``)."""
         if self._own_dir:
             shutil.rmtree(self.work_dir, ignore_errors=True)
         if run_dir is None or not self.options.logger:
-            return
+            return []
+        problems = []
         for i, home in enumerate(self.homes):
-            ulogs = sorted(self.instance_dir(i).rglob("*.ulg"), key=lambda p: p.stat().st_mtime)
-            if ulogs:
+            try:
+                ulogs = sorted(self.instance_dir(i).rglob("*.ulg"), key=lambda p: p.stat().st_mtime)
+                if not ulogs:
+                    problems.append(f"drone {i}: no ULog in {self.instance_dir(i)} (PX4's logger wrote none)")
+                    continue
                 write_ulog_index(run_dir / "logs" / f"drone_{i}", ulogs, clocks[i], home)
+            except OSError as exc:
+                problems.append(f"drone {i}: its ULogs could not be indexed: {exc.strerror or exc}")
+        return problems
 
 
 def write_ulog_index(drone_dir: Path, ulogs: list[Path], clock: BootClock, home_ned_m: Vec3) -> Path:

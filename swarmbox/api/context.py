@@ -60,7 +60,8 @@ class _Context:
 
     @property
     def params(self) -> Mapping[str, Any]:
-        """The algorithm's ``params`` from its config (read-only)."""
+        """The algorithm's ``params`` from its config: this node's own read-only copy (a write raises
+        ``TypeError``, and the run fails naming the hook; lists come as tuples)."""
         return self._node.params
 
     @property
@@ -70,18 +71,29 @@ class _Context:
 
     @property
     def mission(self) -> MissionInfo:
+        """The mission as configured: this node's own read-only copy (as ``params``)."""
         return self._node.mission
 
     def mark(self, name: str, **fields: Any) -> None:
-        """Record a named event marker (with JSON-serialisable fields) in this node's log.
+        """Record a named event marker in this node's log.
 
-        Markers turn into mission metrics in the analyzer (see ``metrics`` in the algo config).
+        Field values must be JSON values: numbers, strings, booleans, None, and lists, tuples and
+        string-keyed dicts of them; numpy scalars and arrays are converted. Anything else (an object
+        whose text would hold a memory address, so that identical runs differ) is a TypeError
+        naming the field. Markers turn into mission metrics in the analyzer (see ``metrics`` in
+        the algo config).
         """
-        self._node.mark(name, fields)
+        self._node.mark(name, {key: json_value(value, f"ctx.mark({name!r}) field {key!r}")
+                               for key, value in fields.items()})
 
     def send_task(self, dst: int, *, code: int = 0, waypoint_ned_m: Sequence[float] | None = None,
-                  yaw_rad: float | None = None, data: str = "", reliable: bool = True) -> None:
-        """Send a task to a direct inferior ``dst``.
+                  yaw_rad: float | None = None, data: str = "", reliable: bool = True) -> bool:
+        """Send a task to a direct inferior ``dst``; returns whether it was sent.
+
+        ``dst`` must be a drone of the mission other than this one (anything else is a ValueError).
+        A drone that is not an alive direct inferior of this node *now* (a peer, a grandchild, an
+        inferior that was lost or has not reported yet) gets nothing: the call returns False, and
+        the refusal is logged (``error/task_refused``) and counted in run.json (``tasks_refused``).
 
         Reliable tasks (the default) are acknowledged and re-sent until they are, and reach the
         receiver's ``on_task`` exactly once and in send order, whatever the network loses or
@@ -91,9 +103,49 @@ class _Context:
         ValueError here, in every runtime, rather than a frame the network cannot carry.
         """
         code = _task_code(code)
+        node = self._node
+        if dst not in node.alive_reports():
+            _refuse_task(node, dst, code)
+            return False
         wp = None if waypoint_ned_m is None else tuple(float(x) for x in waypoint_ned_m)
-        self._node.send_task(dst, code, wp, None if yaw_rad is None else float(yaw_rad), data,
-                             reliable)
+        node.send_task(dst, code, wp, None if yaw_rad is None else float(yaw_rad), data, reliable)
+        return True
+
+
+def _refuse_task(node: Any, dst: Any, code: int) -> None:
+    """Log and count a task to a drone that is not an alive direct inferior; raise for a bad id."""
+    if isinstance(dst, bool) or not isinstance(dst, int) or dst not in node.mission.initial_positions:
+        raise ValueError(f"send_task: {dst!r} is not a drone of the mission "
+                         f"(drones {sorted(node.mission.initial_positions)})")
+    if dst == node.node_id:
+        raise ValueError(f"send_task: drone {dst} cannot send a task to itself")
+    lost = dst in node.inferiors
+    why = "lost inferior" if lost else "not a direct inferior"
+    node.event("error", "task_refused", dst, code=code, reason=why, alive=sorted(node.alive_reports()))
+    node.tasks_refused += 1
+
+
+_JSON_SCALARS = (str, int, float, bool, type(None))
+
+
+def json_value(value: Any, where: str) -> Any:
+    """``value`` as a JSON value (numpy converted, tuples as lists); a TypeError naming ``where``
+    for anything else."""
+    if isinstance(value, _JSON_SCALARS):
+        return value
+    if isinstance(value, list | tuple):
+        return [json_value(v, f"{where}[{i}]") for i, v in enumerate(value)]
+    if isinstance(value, Mapping):
+        out = {}
+        for k, v in value.items():
+            if not isinstance(k, str | int) or isinstance(k, bool):
+                raise TypeError(f"{where}: key {k!r} is a {type(k).__name__}; JSON keys are strings")
+            out[k] = json_value(v, f"{where}[{k!r}]")
+        return out
+    if type(value).__module__ == "numpy" and hasattr(value, "tolist"):   # numpy scalars and arrays
+        return json_value(value.tolist(), where)
+    raise TypeError(f"{where} is a {type(value).__module__}.{type(value).__qualname__}, not a JSON value "
+                    "(numbers, strings, booleans, None, and lists or dicts of them)")
 
 
 def _task_code(code: Any) -> int:

@@ -22,6 +22,7 @@ from swarmbox.api import (
     Task,
     Telemetry,
 )
+from swarmbox.api.views import read_only, read_only_mission
 from swarmbox.core.delivery import DELIVERED, NEW, Window
 from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck, TaskCommand
 from swarmbox.core.node import STAGE_OF, Node, call_hook, hook_error
@@ -49,6 +50,9 @@ _OK_CODE = TEXTS.code("ok")
 class AgentNode(Node):
     def __init__(self, node_id: int, *, superior: int, algorithm: DroneAlgorithm, vehicle, **kw) -> None:
         super().__init__(node_id, **kw)
+        # its own frozen copies: a hook that writes them fails, and no other node sees a change
+        self.params, self.mission = read_only(self.params), read_only_mission(self.mission)
+        self.tasks_refused = 0   # send_task calls refused (the destination not an alive direct inferior)
         self.superior, self.algorithm, self.vehicle = superior, algorithm, vehicle
         self.home_ned_m = tuple(float(x) for x in vehicle.home_ned_m)
         self.ctx = DroneContext(self)

@@ -21,6 +21,7 @@ from __future__ import annotations
 from typing import Protocol
 
 from swarmbox.api import DescendantState, GroundAlgorithm, GroundContext
+from swarmbox.api.views import read_only, read_only_mission
 from swarmbox.core.messages import GROUND_ID, NO_SUBJECT, Heartbeat, ProxAlert, Report, TaskAck
 from swarmbox.core.node import STAGE_OF, Node, call_hook, new_inferior_report
 from swarmbox.core.proximity import DIRECT_PAIRS_UP_TO, Episode, ProximityTracker, kd_tree
@@ -49,6 +50,9 @@ class GroundObserver(Protocol):
 class GroundNode(Node):
     def __init__(self, algorithm: GroundAlgorithm, **kw) -> None:
         super().__init__(GROUND_ID, **kw)
+        # its own frozen copies: a hook that writes them fails, and no other node sees a change
+        self.params, self.mission = read_only(self.params), read_only_mission(self.mission)
+        self.tasks_refused = 0   # send_task calls refused (the destination not an alive direct inferior)
         self.algorithm = algorithm
         self.ctx = GroundContext(self)
         self.reason = ""

@@ -49,8 +49,9 @@ class Vehicle(Protocol):
     def setpoint(self, sp: Setpoint) -> SetpointVerdict:
         """Follow ``sp`` (position / velocity / acceleration, NED mission frame) in OFFBOARD mode.
 
-        The backend's safety monitor refuses non-finite setpoints and clamps speed and geofence
-        violations, emitting a ``safety`` event; the returned verdict (ok / clamped / refused, or
+        The backend's safety monitor refuses non-finite setpoints and keeps every kind within the
+        speed, acceleration, geofence, ceiling and floor limits (docs/core.md, "Safety envelope"),
+        emitting a ``safety`` event for each change; the returned verdict (ok / clamped / refused, or
         ignored when the vehicle cannot follow setpoints now, with the reason) goes to the log.
         """
 

@@ -26,6 +26,7 @@ from swarmbox.hal.sim.params import SimParams
 from swarmbox.run import build, mission
 from swarmbox.run.build import ConfigError
 from swarmbox.run.mission import Mission, MissionError
+from swarmbox.run.params import ParamsError, typed_params
 
 #: The errors that mean "the input is wrong" (exit code 2, nothing written), not "the run failed".
 INPUT_ERRORS = (ConfigError, MissionError, FaultConfigError, TopologyError)
@@ -156,3 +157,7 @@ def _algo(a: DictConfig) -> None:
             raise ConfigError(f"algo.{role}._target_: cannot import '{target}': {exc}") from exc
         if not (isinstance(cls, type) and issubclass(cls, base)):
             raise ConfigError(f"algo.{role}._target_: {target} is not a {base.__name__}")
+    try:   # typed params (the algorithm's Params): a wrong type or an unknown key, before any directory
+        typed_params(a)
+    except ParamsError as exc:
+        raise ConfigError(str(exc)) from None

@@ -18,6 +18,10 @@ from hydra.utils import get_method
 from omegaconf import DictConfig, OmegaConf
 
 from swarmbox.api import MissionInfo
+from swarmbox.run.files import FileProblem, read_text_bounded
+
+#: a mission file larger than this is refused unread (the largest shipped one is a few kB)
+MAX_MISSION_BYTES = 16 * 1024 * 1024
 
 
 class MissionError(ValueError):
@@ -44,13 +48,28 @@ class Mission:
 
 
 def _position(drone: Any, pos: Any, where: str) -> tuple[float, float, float]:
+    """A spawn point: exactly [north, east] in metres (every drone starts on the ground, d = 0)."""
     try:
         vals = [float(x) for x in pos]
     except (TypeError, ValueError):
         raise MissionError(f"{where}: position of drone {drone} must be [north, east], got {pos!r}") from None
-    if len(vals) not in (2, 3) or not all(math.isfinite(v) for v in vals):
-        raise MissionError(f"{where}: position of drone {drone} must be [north, east], got {pos!r}")
+    if len(vals) != 2:
+        extra = " (drones start on the ground: there is no altitude to give)" if len(vals) == 3 else ""
+        raise MissionError(f"{where}: position of drone {drone} must be [north, east] (2 numbers), "
+                           f"got {len(vals)}: {pos!r}{extra}")
+    if not all(math.isfinite(v) for v in vals):
+        raise MissionError(f"{where}: position of drone {drone} must be finite, got {pos!r}")
     return (vals[0], vals[1], 0.0)
+
+
+def check_inside_fence(pos: Mapping[int, tuple[float, float, float]], fence_m: float, where: str) -> None:
+    """Refuse spawn points outside the geofence (the safety monitor would pull each drone back in at
+    once, or a typo put it kilometres away)."""
+    for drone, (n, e, _) in pos.items():
+        r = math.hypot(n, e)
+        if not r <= fence_m:
+            raise MissionError(f"{where}: drone {drone} starts {r:.6g} m from the origin, outside the "
+                               f"geofence (run.safety.geofence_radius_m = {fence_m:g} m)")
 
 
 def check_spacing(pos: Mapping[int, tuple[float, float, float]], min_m: float, where: str) -> None:
@@ -86,11 +105,12 @@ def _int_keys(mapping: Mapping, where: str) -> dict[int, Any]:
 
 def from_parts(name: str, positions: Mapping, superiors: Mapping, values: Mapping,
                swarm_size: int | None, obstacles: list, max_sim_time_s: float, where: str,
-               min_spawn_separation_m: float = 0.0) -> Mission:
+               min_spawn_separation_m: float = 0.0, fence_m: float = math.inf) -> Mission:
     pos = {d: _position(d, p, f"{where}.initial_positions")
            for d, p in _int_keys(positions, f"{where}.initial_positions").items()}
     if not pos:
         raise MissionError(f"{where}: initial_positions is empty; a mission needs at least one drone")
+    check_inside_fence(pos, fence_m, f"{where}.initial_positions")
     try:
         size = len(pos) if swarm_size is None else int(swarm_size)
     except (TypeError, ValueError):
@@ -136,12 +156,10 @@ _StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _m
 
 def read_yaml(p: Path, key: str) -> Any:
     """A YAML file's content; any reason it cannot be read becomes a MissionError naming the file."""
-    if not p.is_file():
-        raise MissionError(f"{key}: no such file: {p}")
     try:
-        text = p.read_bytes().decode("utf-8")
-    except OSError as exc:
-        raise MissionError(f"{key} {p}: cannot read it ({exc.strerror})") from None
+        text = read_text_bounded(p, MAX_MISSION_BYTES).decode("utf-8")
+    except FileProblem as exc:
+        raise MissionError(f"{key} {p}: {exc}" if exc.exists else f"{key}: {exc}: {p}") from None
     except UnicodeDecodeError:
         raise MissionError(f"{key} {p}: not a text file (not UTF-8); expected a YAML mission file") from None
     if not text.strip():
@@ -158,7 +176,7 @@ def read_yaml(p: Path, key: str) -> Any:
 
 
 def load_legacy(path: str | Path, max_sim_time_s: float, obstacles: list,
-                min_spawn_separation_m: float = 0.0) -> Mission:
+                min_spawn_separation_m: float = 0.0, fence_m: float = math.inf) -> Mission:
     """Read a mission file in the original SwarmBox YAML format."""
     p = Path(path).expanduser()
     raw = read_yaml(p, "mission.file")
@@ -172,7 +190,7 @@ def load_legacy(path: str | Path, max_sim_time_s: float, obstacles: list,
     return from_parts(str(mission.get("type", p.stem)), drone["initial_positions"],
                       drone.get("superiors") or {}, mission.get("values") or {},
                       mission.get("swarm_size"), obstacles, max_sim_time_s, f"mission.file {p}",
-                      min_spawn_separation_m)
+                      min_spawn_separation_m, fence_m)
 
 
 def load(cfg: DictConfig, rng: np.random.Generator | None = None) -> Mission:
@@ -181,12 +199,13 @@ def load(cfg: DictConfig, rng: np.random.Generator | None = None) -> Mission:
     if not (math.isfinite(m.max_sim_time_s) and m.max_sim_time_s > 0):
         raise MissionError(f"mission.max_sim_time_s must be > 0, got {m.max_sim_time_s!r}")
     obstacles = OmegaConf.to_container(m.obstacles, resolve=True)
+    fence_m = float(cfg.run.safety.geofence_radius_m) if "run" in cfg else math.inf
     if m.file:
-        mission = load_legacy(m.file, m.max_sim_time_s, obstacles, m.min_spawn_separation_m)
+        mission = load_legacy(m.file, m.max_sim_time_s, obstacles, m.min_spawn_separation_m, fence_m)
     else:
         mission = from_parts(m.name, _mapping(m, "initial_positions"), _mapping(m, "superiors"),
                              _mapping(m, "values"), m.swarm_size, obstacles, m.max_sim_time_s, "mission",
-                             m.min_spawn_separation_m)
+                             m.min_spawn_separation_m, fence_m)
     # A mission file's own values (e.g. its packages) win over the group's generator: the generator
     # fills values only when the file has none.
     if m.generator is not None and not (m.file and mission.values):

@@ -229,7 +229,7 @@ class NodeProcess:
             status, reason = "ok", ""
         out = {"node": self.name, "status": status, "reason": reason, "stage": node.stage.name,
                "ticks": self.time.tick, "sim_time_s": self.time.t_s, "restarted": self.restarted,
-               "incarnation": self.incarnation}
+               "incarnation": self.incarnation, "tasks_refused": node.tasks_refused}
         if self.node_id == GROUND_ID:
             out["lost_drones"] = sorted(i for i, inf in node.inferiors.items() if not inf.alive)
         return out

@@ -71,12 +71,14 @@ def autopilots(cfg: DictConfig, m: Any, run_dir: Path) -> tuple[Any, dict[str, d
     from swarmbox.hal.mavlink.frames import GeoFrame
     from swarmbox.hal.px4.backend import Px4Params
     from swarmbox.hal.px4.sitl import SitlLauncher, connection_of
+    from swarmbox.hal.safety import SafetyLimits
 
     params = OmegaConf.to_container(b, resolve=True)
     params = {k: v for k, v in params.items() if k not in ("_target_", "name")}
     p = Px4Params.from_kwargs(params)
     homes = [tuple(float(x) for x in m.initial_positions[i]) for i in m.drone_ids]
-    sitl = SitlLauncher(p, homes, GeoFrame(p.origin_lat_deg, p.origin_lon_deg, p.origin_alt_m), run_dir)
+    sitl = SitlLauncher(p, homes, GeoFrame(p.origin_lat_deg, p.origin_lon_deg, p.origin_alt_m), run_dir,
+                        SafetyLimits(**OmegaConf.to_container(cfg.run.safety)))
     sitl.start([0] * len(homes))
     return sitl, {node_name(i): {"connections": [connection_of(k)], "system_ids": [k + 1]}
                   for k, i in enumerate(m.drone_ids)}
@@ -280,7 +282,9 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         status, reason = outcome(results)
         g = results[node_name(GROUND_ID)]
         manifest.update(status=status, reason=reason, node_results=results, ticks=g.get("ticks", 0),
-                        sim_time_s=g.get("sim_time_s", 0.0))
+                        sim_time_s=g.get("sim_time_s", 0.0),
+                        tasks_refused={k: r["tasks_refused"] for k, r in results.items()
+                                       if r.get("tasks_refused")})
     except interrupt.RunInterrupted as exc:
         manifest.update(status="interrupted", reason=str(exc))
     except KeyboardInterrupt:   # no handler installed (programmatic use): record, then propagate

@@ -134,7 +134,9 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         reason = "; ".join(filter(None, [outcome.reason, tally.summary()]))
         manifest.update(status=outcome.status, reason=reason,
                         sim_time_s=outcome.sim_time_s, wall_time_s=outcome.wall_time_s, ticks=outcome.ticks,
-                        real_time_factor=outcome.real_time_factor, safety=tally.record())
+                        real_time_factor=outcome.real_time_factor, safety=tally.record(),
+                        tasks_refused={node_name(n.node_id): n.tasks_refused
+                                       for n in (swarm.ground, *swarm.agents) if n.tasks_refused})
     except checks.INPUT_ERRORS as exc:
         if discard:
             raise

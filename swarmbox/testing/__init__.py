@@ -9,13 +9,16 @@ from swarmbox.testing.backend_suite import (
     BACKEND_CHECKS,
     BackendFactory,
     Flight,
+    check_acceleration_fence,
     check_disarmed_setpoint_ignored,
+    check_held_velocity_fence,
     check_hold_stops,
     check_mission_cycle,
     check_nonfinite_setpoint_refused,
     check_protocol,
     check_return_to_launch,
     check_setpoint_verdicts,
+    check_velocity_fence,
     run_backend_suite,
 )
 
@@ -23,5 +26,5 @@ __all__ = [
     "BACKEND_CHECKS", "BackendFactory", "ConformanceError", "ConformanceReport", "Flight", "check_algorithm",
     "check_disarmed_setpoint_ignored", "check_hold_stops", "check_mission_cycle",
     "check_nonfinite_setpoint_refused", "check_protocol", "check_return_to_launch", "check_setpoint_verdicts",
-    "run_backend_suite",
+    "check_acceleration_fence", "check_held_velocity_fence", "check_velocity_fence", "run_backend_suite",
 ]

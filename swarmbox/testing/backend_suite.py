@@ -1,6 +1,7 @@
 """Conformance suite every :class:`~swarmbox.hal.vehicle.Backend` must pass.
 
-Each check is a plain function taking a *factory* — ``factory(homes_ned_m) -> Backend`` — builds a
+Each check is a plain function taking a *factory* — ``factory(homes_ned_m, **backend_kw) -> Backend``,
+where the fence checks pass ``limits=`` (a :class:`~swarmbox.hal.safety.SafetyLimits`) — builds a
 fresh fleet, flies it through one scenario and asserts numeric properties of the telemetry and
 events. Use them from pytest::
 
@@ -20,6 +21,9 @@ Scenarios (two vehicles; the second is never commanded and must stay disarmed at
   keeps its previous target.
 - ``check_setpoint_verdicts`` — ``setpoint`` returns the safety monitor's verdict (ok, clamped or
   refused, with the reason) for every setpoint: what the framework writes to ``setpoints.parquet``.
+- ``check_velocity_fence``, ``check_acceleration_fence`` — a velocity / an acceleration flying out and
+  up stays within a 12 m geofence (+1 m) and a 7 m ceiling (+0.5 m); verdicts ``clamped``, events logged.
+- ``check_held_velocity_fence`` — the same for a velocity sent for 1 s and then held, never sent again.
 - ``check_hold_stops`` — ``hold()`` brakes a moving vehicle and keeps it still.
 - ``check_disarmed_setpoint_ignored`` — setpoints to a disarmed vehicle move nothing.
 
@@ -33,6 +37,7 @@ import time
 from collections.abc import Callable, Sequence
 
 from swarmbox.api import FlightMode, Setpoint, SetpointVerdict, Telemetry
+from swarmbox.hal.safety import SafetyLimits
 from swarmbox.hal.vehicle import Backend, Vehicle, VehicleEvent
 
 Vec3 = tuple[float, float, float]
@@ -251,19 +256,21 @@ def check_disarmed_setpoint_ignored(factory: BackendFactory, tick_s: float = 0.0
 
 
 def check_setpoint_verdicts(factory: BackendFactory, tick_s: float = 0.025) -> None:
-    """Every setpoint gets a verdict: ok, clamped (geofence, ceiling, speed) or refused (non-finite,
-    absurd jump), each but ok with its reason."""
+    """Every setpoint gets a verdict: ok, clamped (geofence, ceiling, floor, speed, accel) or refused
+    (non-finite, absurd jump), each but ok with its reason code."""
     backend = _fleet(factory)
     f, v, home = Flight(backend, tick_s), backend.vehicles[0], HOMES[0]
     try:
         f.airborne(0)
         hold = Setpoint.position(*offset(home, 0.0, 0.0, -TAKEOFF_ALT_M))
         cases = [(hold, "ok", ""),
-                 (Setpoint.position(math.nan, 0.0, -3.0), "refused", "non-finite"),
-                 (Setpoint.position(home[0] + 1500.0, home[1], -3.0), "refused", "away"),
+                 (Setpoint.position(math.nan, 0.0, -3.0), "refused", "nonfinite"),
+                 (Setpoint.position(home[0] + 1500.0, home[1], -3.0), "refused", "jump"),
                  (Setpoint.position(home[0], home[1] + 600.0, -3.0), "clamped", "geofence"),
                  (Setpoint.position(home[0], home[1], -200.0), "clamped", "ceiling"),
-                 (Setpoint.velocity(0.0, 100.0, 0.0), "clamped", "norm")]
+                 (Setpoint.position(home[0], home[1], 3.0), "clamped", "floor"),
+                 (Setpoint.velocity(0.0, 100.0, 0.0), "clamped", "speed"),
+                 (Setpoint.acceleration(0.0, 100.0, 0.0), "clamped", "accel")]
         for sp, action, reason in cases:
             verdict = v.setpoint(sp)
             assert isinstance(verdict, SetpointVerdict), f"setpoint returned {verdict!r}, not a verdict"
@@ -275,9 +282,68 @@ def check_setpoint_verdicts(factory: BackendFactory, tick_s: float = 0.025) -> N
         backend.close()
 
 
+#: the envelope the fence checks fly against: small, so that a vehicle reaches it in seconds
+FENCE = SafetyLimits(geofence_radius_m=12.0, max_alt_m=7.0)
+FENCE_TOL_M, CEILING_TOL_M = 1.0, 0.5
+
+
+def _check_envelope(factory: BackendFactory, sp: Setpoint, fly_s: float, tick_s: float,
+                    send_s: float = math.inf) -> None:
+    """Fly ``sp`` (outward and upward) for ``fly_s``, sent every tick for ``send_s`` and then held: the
+    vehicle stays within FENCE (+ tolerance), the verdicts turn ``clamped`` naming geofence and
+    ceiling, and safety events say so."""
+    backend = factory(list(HOMES), limits=FENCE)
+    f, v = Flight(backend, tick_s), backend.vehicles[0]
+    verdicts: list[SetpointVerdict] = [v.setpoint(sp)] if send_s < math.inf else []
+    reach = [0.0, 0.0]   # the largest radius and altitude seen
+    start = [-1.0]
+
+    def fly() -> None:
+        start[0] = f.t_s if start[0] < 0 else start[0]
+        if f.t_s - start[0] < send_s:
+            verdicts.append(v.setpoint(sp))
+        n, e, d = f.tel().pos_ned_m
+        reach[0], reach[1] = max(reach[0], math.hypot(n, e)), max(reach[1], -d)
+
+    try:
+        f.airborne(0)
+        f.run_for(fly_s, fly)
+        assert reach[0] <= FENCE.geofence_radius_m + FENCE_TOL_M, f"flew to radius {reach[0]:.2f} m"
+        assert reach[1] <= FENCE.max_alt_m + CEILING_TOL_M, f"climbed to {reach[1]:.2f} m"
+        assert reach[0] > FENCE.geofence_radius_m - 2.0 and reach[1] > FENCE.max_alt_m - 1.0, (
+            f"never came near the envelope: radius {reach[0]:.2f} m, altitude {reach[1]:.2f} m")
+        if send_s == math.inf:   # held at both boundaries: the last second's verdicts say so
+            recent = verdicts[-max(1, round(1.0 / tick_s)):]
+            codes = {code for v in recent for code in v.reason.split("+")}
+            clamped = sum(v.action == "clamped" for v in recent)   # an acceleration may swing back in
+            assert 2 * clamped >= len(recent) and {"geofence", "ceiling"} <= codes, recent[-1]
+        codes = {e.data.get("reason") for e in f.events_of(0, "safety") if e.name == "setpoint_clamped"}
+        assert any("geofence" in c for c in codes) and any("ceiling" in c for c in codes), codes
+        f.land_and_disarm(0)
+        _assert_untouched(f)
+    finally:
+        backend.close()
+
+
+def check_velocity_fence(factory: BackendFactory, tick_s: float = 0.025) -> None:
+    """A velocity flying out through the geofence and up through the ceiling is stopped at both."""
+    _check_envelope(factory, Setpoint.velocity(5.0, 0.0, -2.0), 10.0, tick_s)
+
+
+def check_acceleration_fence(factory: BackendFactory, tick_s: float = 0.025) -> None:
+    """An acceleration flying out through the geofence and up through the ceiling is stopped at both."""
+    _check_envelope(factory, Setpoint.acceleration(2.0, 0.0, -1.0), 12.0, tick_s)
+
+
+def check_held_velocity_fence(factory: BackendFactory, tick_s: float = 0.025) -> None:
+    """A velocity sent for 1 s and then no more (the vehicle keeps flying it) is stopped at both too."""
+    _check_envelope(factory, Setpoint.velocity(5.0, 0.0, -2.0), 10.0, tick_s, send_s=1.0)
+
+
 BACKEND_CHECKS: tuple[Callable[..., None], ...] = (
     check_protocol, check_mission_cycle, check_return_to_launch, check_nonfinite_setpoint_refused,
-    check_hold_stops, check_disarmed_setpoint_ignored, check_setpoint_verdicts,
+    check_hold_stops, check_disarmed_setpoint_ignored, check_setpoint_verdicts, check_velocity_fence,
+    check_acceleration_fence, check_held_velocity_fence,
 )
 
 

@@ -29,7 +29,7 @@ def fleet(homes, **kw) -> MavsimBackend:
 
 #: checks that fly for several seconds of wall time: with the end-to-end tests (pytest -m slow)
 LONG = {"check_hold_stops", "check_return_to_launch", "check_mission_cycle",
-        "check_nonfinite_setpoint_refused"}
+        "check_nonfinite_setpoint_refused", "check_held_velocity_fence"}
 
 
 @pytest.mark.parametrize("check", [pytest.param(c, marks=pytest.mark.slow) if c.__name__ in LONG else c

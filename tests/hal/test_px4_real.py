@@ -133,3 +133,31 @@ def test_signing_key_refuses_a_px4_that_does_not_sign():
         pytest.skip("this PX4 build knows MAV_SIGN_CFG: signing end to end is not covered by this test")
     with pytest.raises(TimeoutError, match=r"drone 0: \d+ packets unsigned or wrongly signed"):
         px4_fleet([(0.0, 0.0, 0.0)], signing_key="swarmbox px4 signing test", connect_timeout_s=8.0)
+
+
+@pytest.mark.parametrize("kind", ["velocity", "acceleration"])
+def test_outward_flight_is_held_inside_the_envelope_on_px4(run, kind):
+    """Four PX4 vehicles flying a velocity / an acceleration out (east or west) and up, every tick for
+    14 s, stop at a 20 m geofence (+1 m) and an 8 m ceiling (+0.5 m), with ``clamped`` verdicts and
+    safety events; PX4's own geofence (just outside) never has to act. Checked while the setpoints fly
+    (EXECUTION): in PX4's LAND mode that follows, SIH's estimate wanders (see PX4_GAPS; 1.2 m seen)."""
+    from tests.hal.test_fence_runs import CEILING_M, FENCE_M, outward
+
+    manifest, d = run(*outward(kind), "backend=px4", f"backend.px4_build={BUILD}", f"run.speed={SPEED:g}",
+                      "backend.sitl.logger=false", f"backend.sitl.first_instance={FIRST}", name=f"px4{kind}")
+    assert manifest["status"] == "ok", manifest["reason"] or manifest["traceback"]
+    assert "setpoint_clamped" in manifest["safety"]
+    boot = (d / "px4" / "instance_0" / "out.log").read_text(errors="replace")   # drone 0's home: the origin
+    assert "GF_MAX_HOR_DIST: curr: 0.0000 -> new: 25.0000" in boot and "GF_ACTION: curr: 2 -> new: 3" in boot
+    for i in range(4):
+        st = table(d, f"drone_{i}", "state")
+        st = st[st["stage"] == 3]   # EXECUTION
+        assert np.hypot(st["pos_n"], st["pos_e"]).max() <= FENCE_M + 1.0, i
+        assert (-st["pos_d"]).max() <= CEILING_M + 0.5, i
+        sp = table(d, f"drone_{i}", "setpoints")
+        assert (sp["verdict"] == "clamped").any() and sp["reason"].str.contains("geofence").any()
+        ev = table(d, f"drone_{i}", "events")
+        assert ((ev["kind"] == "safety") & (ev["name"] == "setpoint_clamped")).any()
+        px4 = ev[ev["kind"] != "safety"]   # PX4's own layer stayed quiet (no status text about it)
+        assert not px4["data"].str.contains("geofence", case=False).any(), px4[px4["data"].str.contains(
+            "geofence", case=False)]

@@ -29,7 +29,7 @@ def hypot_h(v) -> float:
 
 @pytest.mark.parametrize("check", BACKEND_CHECKS, ids=lambda c: c.__name__)
 def test_conformance(check):
-    check(lambda homes: make(homes, seed=7))
+    check(lambda homes, **kw: make(homes, seed=7, **kw))
 
 
 def test_step_response_reaches_target_within_speed_limits():

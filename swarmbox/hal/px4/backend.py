@@ -126,7 +126,7 @@ class Px4Backend:
                  f"running, on UDP ports {_ports(specs)} "
                  "(backend.px4_build=<PX4-Autopilot tree> launches SITL)")
             return None
-        launcher = SitlLauncher(self.params, homes, self.frame, self.run_dir)
+        launcher = SitlLauncher(self.params, homes, self.frame, self.run_dir, self.limits)
         first = launcher.instance(0)
         _say(f"px4 backend: launching {n} PX4 SITL instance(s) {first}-{first + n - 1} from {launcher.build} "
              f"(UDP ports {_ports(launcher.connections())}; backend.sitl.first_instance={first})")

@@ -45,6 +45,7 @@ from typing import Any
 from swarmbox.hal.launch import ProcessSet, without_keys
 from swarmbox.hal.mavlink.frames import GeoFrame
 from swarmbox.hal.px4.params import BootClock, Px4Params
+from swarmbox.hal.safety import SafetyLimits, px4_geofence
 
 Vec3 = tuple[float, float, float]
 ENV_BUILD = "SWARMBOX_PX4_BUILD"
@@ -137,8 +138,9 @@ def connection_of(i: int) -> str:
 
 
 def instance_env(home_geo: tuple[float, float, float], options: SitlOptions, speed: float,
-                 base: Mapping[str, str]) -> dict[str, str]:
-    """The environment of one PX4 instance: model, home, speed factor, parameters."""
+                 base: Mapping[str, str], fence: Mapping[str, float | int] | None = None) -> dict[str, str]:
+    """The environment of one PX4 instance: model, home, speed factor, parameters (``fence``: PX4's
+    geofence parameters, which the configured ``sitl.params`` may override)."""
     env = dict(base)
     lat, lon, alt = home_geo
     env.update(PX4_SIM_MODEL=options.model, PX4_HOME_LAT=f"{lat:.9f}", PX4_HOME_LON=f"{lon:.9f}",
@@ -148,6 +150,8 @@ def instance_env(home_geo: tuple[float, float, float], options: SitlOptions, spe
     if not options.logger:
         env["PX4_PARAM_SDLOG_MODE"] = "-1"
     env["PX4_PARAM_SYS_FAILURE_EN"] = "1"   # MAV_CMD_INJECT_FAILURE answered (simulation only)
+    for name, value in (fence or {}).items():
+        env[f"PX4_PARAM_{name}"] = str(value)
     for name, value in options.params.items():
         env[f"PX4_PARAM_{name.upper()}"] = str(value)
     return env
@@ -158,13 +162,15 @@ class SitlLauncher(ProcessSet):
 
     what = "PX4 instance"
 
-    def __init__(self, params: Px4Params, homes: list[Vec3], frame: GeoFrame, run_dir: Path | None) -> None:
+    def __init__(self, params: Px4Params, homes: list[Vec3], frame: GeoFrame, run_dir: Path | None,
+                 limits: SafetyLimits | None = None) -> None:
         build = resolve_build(params.px4_build)
         if build is None:
             raise ValueError(f"px4 backend: no PX4 build to launch for px4_build={params.px4_build!r}")
         self.build = build
         self.options = SitlOptions.from_mapping(params.sitl)
         self.homes, self.frame, self.speed = homes, frame, params.speed
+        self.limits = limits   # the safety envelope, mirrored in PX4's own geofence (None: PX4's defaults)
         self._own_dir = run_dir is None   # a temporary working directory, removed after the run
         self.work_dir = (run_dir / "px4" if run_dir is not None
                          else Path(tempfile.mkdtemp(prefix="swarmbox_px4_")))
@@ -191,8 +197,9 @@ class SitlLauncher(ProcessSet):
         for i, home in enumerate(self.homes):
             wd = self.instance_dir(i)
             wd.mkdir(parents=True, exist_ok=True)
+            fence = None if self.limits is None else px4_geofence(self.limits, home)
             env = instance_env(self.frame.geodetic_of(home), self.options, self.speed,
-                               without_keys(os.environ))
+                               without_keys(os.environ), fence)
             cmd = [str(self.binary), "-i", str(self.instance(i)), "-d", str(self.build / "etc")]
             with open(wd / "out.log", "wb") as out, open(wd / "err.log", "wb") as err:
                 self.procs.append(subprocess.Popen(cmd, cwd=wd, env=env, stdin=subprocess.DEVNULL, stdout=out,

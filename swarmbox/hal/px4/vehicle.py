@@ -61,7 +61,7 @@ from swarmbox.hal.mavlink.paramset import ParamSetter
 from swarmbox.hal.mavlink.statustext import StatusTexts
 from swarmbox.hal.px4.linkreport import LinkReport
 from swarmbox.hal.px4.params import LinkConfig
-from swarmbox.hal.safety import SafetyLimits, check_setpoint
+from swarmbox.hal.safety import HeldSetpoint, SafetyLimits, check_setpoint, safety_event
 
 Vec3 = tuple[float, float, float]
 #: emit(kind, name, data): an event of this vehicle, stamped by the backend.
@@ -109,6 +109,7 @@ class Px4Vehicle:
         self._tel: Telemetry | None = None
         self._sp: Setpoint | None = None          # streamed setpoint, vehicle-local frame
         self._sp_new, self._sp_sent_s, self._offboard_try_s = False, -math.inf, -math.inf
+        self._held = HeldSetpoint()                # the velocity/acceleration asked for, judged again
         self._stream_since_s: float | None = None
         self._blocked = ""                         # why setpoints are not followed (autopilot's choice)
         self._noted: set[tuple[str, str]] = set()
@@ -158,9 +159,7 @@ class Px4Vehicle:
     def setpoint(self, sp: Setpoint) -> SetpointVerdict:
         verdict = check_setpoint(sp, self.telemetry(), self._limits)
         if verdict.action != "ok":
-            self._emit("safety", "setpoint_" + verdict.action,
-                       {"reason": verdict.reason, "kind": sp.kind.name.lower(),
-                        "requested": [float(x) for x in sp.ned]})
+            self._emit("safety", "setpoint_" + verdict.action, safety_event(sp, verdict, self.telemetry()))
         safe = verdict.setpoint
         result = SetpointVerdict(verdict.action, verdict.reason, safe)
         if safe is None:
@@ -169,12 +168,27 @@ class Px4Vehicle:
             reason = "disarmed" if not self._armed else ("link lost" if self.link_lost else self._blocked)
             self._deny("setpoint", reason)
             return SetpointVerdict("ignored", reason)
-        local = self._frame.setpoint_to_local(safe)
-        if local != self._sp:
-            self._sp, self._sp_new = local, True
+        self._held.asked(sp)
+        self._fly(safe)
         if self._stream_since_s is None:
             self._stream_since_s = self._now
         return result
+
+    def _fly(self, safe: Setpoint) -> None:
+        local = self._frame.setpoint_to_local(safe)
+        if local != self._sp:
+            self._sp, self._sp_new = local, True
+
+    def _judge_held(self) -> None:
+        """A velocity or acceleration no longer sent is still streamed: keep it inside the envelope."""
+        held = self._held.stale()
+        if held is None or self._sp is None:
+            return
+        verdict = check_setpoint(held, self.telemetry(), self._limits)
+        if verdict.action != "ok":
+            self._emit("safety", "setpoint_" + verdict.action, safety_event(held, verdict, self.telemetry()))
+        if verdict.setpoint is not None:
+            self._fly(verdict.setpoint)
 
     def land(self) -> None:
         self._stop_offboard()
@@ -215,6 +229,7 @@ class Px4Vehicle:
             return
         if not self.link_lost and now_s - self._hb_s > self._cfg.link_timeout_s:
             self._lose_link()
+        self._judge_held()
         self._stream()
         self._cmds.service(now_s)
         self._params.service(now_s)
@@ -370,6 +385,7 @@ class Px4Vehicle:
 
     def _stop_offboard(self) -> None:
         self._sp, self._stream_since_s, self._blocked = None, None, ""
+        self._held.asked(None)
 
     def _deny(self, cmd: str, reason: str) -> None:
         if (cmd, reason) not in self._noted:

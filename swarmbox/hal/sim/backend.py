@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from swarmbox.api import Telemetry
-from swarmbox.hal.safety import SafetyLimits
+from swarmbox.hal.safety import SafetyLimits, reach_m
 from swarmbox.hal.sim import kernel
 from swarmbox.hal.sim.control import CascadedController
 from swarmbox.hal.sim.params import SimParams
@@ -120,6 +120,8 @@ class SimBackend:
         self._vertical: tuple = ()
         self._supervised: set[int] = set()
         self._supervise_order: list[int] | None = []   # sorted(self._supervised); None: to be sorted again
+        self._watched: set[int] = set()   # vehicles flying a velocity/acceleration in OFFBOARD
+        self._watch_order: np.ndarray | None = None
         self._closed = False
         self.vehicles = [SimVehicle(self, i, (h[0], h[1], h[2]), ctrl=self.ctrl, params=p, limits=limits)
                          for i, h in enumerate(homes.tolist())]
@@ -224,6 +226,8 @@ class SimBackend:
         if self._supervised:
             self._supervise()
         self._tel, self._battery_ok = None, jit is not None
+        if self._watched:
+            self._judge_held()
 
     def _after_args(self, dt_s: float) -> tuple:
         return (self._pos, self._gnss.err_ned_m, self._est, self.airborne, dt_s, self._air_s,
@@ -319,7 +323,27 @@ class SimBackend:
                 self._supervised.discard(i)
                 self._supervise_order = None
 
+    def _judge_held(self) -> None:
+        """Held velocities and accelerations near the envelope are judged again (one array test for all)."""
+        order = self._watch_order
+        if order is None:
+            order = self._watch_order = np.array(sorted(self._watched), dtype=np.intp)
+        lim, est = self.limits, self._est[:, order]   # (3, n): north, east, down rows
+        reach = reach_m(lim)
+        near = (lim.geofence_radius_m - np.hypot(est[0], est[1]) <= reach) | (lim.max_alt_m + est[2] <= reach)
+        if near.any():
+            for i in order[near].tolist():
+                self.vehicles[i].judge_held()
+
     # ---- services for SimVehicle (the SimFleet protocol) ------------------------------------------
+    def watch(self, i: int, on: bool) -> None:
+        """Judge vehicle ``i``'s held velocity or acceleration near the envelope at every step, or not."""
+        if on:
+            self._watched.add(i)
+        else:
+            self._watched.discard(i)
+        self._watch_order = None
+
     def supervise(self, i: int) -> None:
         """Have the supervisor watch vehicle ``i`` from the next step on."""
         if i not in self._supervised:

@@ -15,7 +15,7 @@ import math
 from typing import Any, Protocol
 
 from swarmbox.api import FlightMode, Setpoint, SetpointKind, SetpointVerdict, Telemetry
-from swarmbox.hal.safety import SafetyLimits, check_setpoint
+from swarmbox.hal.safety import HeldSetpoint, SafetyLimits, check_setpoint, near_boundary, safety_event
 from swarmbox.hal.sim.control import CascadedController
 from swarmbox.hal.sim.params import GRAVITY_M_S2, SimParams
 
@@ -60,6 +60,11 @@ class SimFleet(Protocol):
         """Record a vehicle event (``kind``/``name`` as :class:`swarmbox.hal.vehicle.VehicleEvent`)."""
         ...
 
+    def watch(self, i: int, on: bool) -> None:
+        """Have vehicle ``i``'s held velocity or acceleration judged near the envelope at every step
+        (``judge_held``), or no longer."""
+        ...
+
 
 class SimVehicle:
     """A simulated PX4-like autopilot (implements :class:`swarmbox.hal.vehicle.Vehicle`).
@@ -89,6 +94,8 @@ class SimVehicle:
         self._last_ok: Setpoint | None = None   # ... when the safety check passed it unchanged
         self._ok_verdict = SetpointVerdict("ok")   # the verdict then
         self._noted: set[tuple[str, str]] = set()   # denials already reported in this mode
+        self._held = HeldSetpoint()   # the velocity/acceleration asked for, judged again near the envelope
+        self._watched = False         # ... by the fleet, from the first one in OFFBOARD on
 
     # ---- Vehicle protocol ---------------------------------------------------------------------
     def telemetry(self) -> Telemetry:
@@ -136,9 +143,14 @@ class SimVehicle:
     def setpoint(self, sp: Setpoint) -> SetpointVerdict:
         if sp == self._last_ok and self.frozen is None:
             # the setpoint flown since last tick, passed unchanged then; in OFFBOARD and armed (any
-            # mode change forgets it). Only the jump limit depends on the vehicle's state.
-            if sp.kind is not _POSITION or math.dist(sp.ned, self._fleet.estimate_ned(self.drone_id)) <= \
-                    self._limits.max_jump_m:
+            # mode change forgets it). What depends on the vehicle's state: the jump limit of a
+            # position, the envelope near its boundary for a velocity or an acceleration.
+            self._held.fresh = True
+            est = self._fleet.estimate_ned(self.drone_id)
+            if sp.kind is _POSITION:
+                if math.dist(sp.ned, est) <= self._limits.max_jump_m:
+                    return self._ok_verdict
+            elif not near_boundary(est, self._limits):
                 return self._ok_verdict
         if self._refuse("setpoint"):
             return SetpointVerdict("ignored", "disarmed")
@@ -146,13 +158,26 @@ class SimVehicle:
         result = SetpointVerdict(verdict.action, verdict.reason, verdict.setpoint)
         if verdict.action != "ok":
             self._fleet.emit(self.drone_id, "safety", "setpoint_" + verdict.action,
-                         {"reason": verdict.reason, "kind": sp.kind.name.lower(),
-                          "requested": [float(x) for x in sp.ned]})
-        sp = verdict.setpoint
+                             safety_event(sp, verdict, self.telemetry()))
+        requested, sp = sp, verdict.setpoint
         if sp is None or (self.mode is FlightMode.OFFBOARD and sp == self._last_sp):
-            if sp is not None and verdict.action == "ok":
-                self._last_ok, self._ok_verdict = sp, result
+            if sp is not None:
+                self._held.asked(requested)
+                if verdict.action == "ok":
+                    self._last_ok, self._ok_verdict = sp, result
             return result
+        self._command(sp)
+        self._set_mode(FlightMode.OFFBOARD)
+        self._last_sp = sp
+        self._held.asked(requested)
+        if sp.kind is not _POSITION and not self._watched:
+            self._watched = True
+            self._fleet.watch(self.drone_id, True)
+        if verdict.action == "ok":
+            self._last_ok, self._ok_verdict = sp, result
+        return result
+
+    def _command(self, sp: Setpoint) -> None:
         ctrl, i = self._ctrl, self.drone_id
         if sp.kind is SetpointKind.POSITION:
             ctrl.set_position(i, sp.ned)
@@ -161,11 +186,21 @@ class SimVehicle:
         else:
             ctrl.set_acceleration(i, sp.ned)
         ctrl.set_yaw_target(i, sp.yaw_rad)
-        self._set_mode(FlightMode.OFFBOARD)
-        self._last_sp = sp
-        if verdict.action == "ok":
-            self._last_ok, self._ok_verdict = sp, result
-        return result
+
+    def judge_held(self) -> None:
+        """Judge the velocity or acceleration flown without a new setpoint since the last step again
+        on the vehicle's state (the fleet calls this near the envelope)."""
+        held = self._held.stale()
+        if held is None or self.mode is not FlightMode.OFFBOARD or self.frozen is not None:
+            return
+        verdict = check_setpoint(held, self.telemetry(), self._limits)
+        if verdict.action != "ok":
+            self._fleet.emit(self.drone_id, "safety", "setpoint_" + verdict.action,
+                             safety_event(held, verdict, self.telemetry()))
+        sp = verdict.setpoint
+        if sp is not None and sp != self._last_sp:
+            self._command(sp)
+            self._last_sp, self._last_ok = sp, None
 
     def land(self) -> None:
         if self._refuse("land"):
@@ -278,6 +313,10 @@ class SimVehicle:
     def _set_mode(self, mode: FlightMode) -> None:
         if mode is not self.mode:
             self._noted.clear()
+            self._held.asked(None)
+            if self._watched:
+                self._watched = False
+                self._fleet.watch(self.drone_id, False)
         self.mode, self._last_sp, self._last_ok, self._ground_since_s = mode, None, None, None
         self._ctrl.set_offboard_limits(self.drone_id, mode is FlightMode.OFFBOARD)
         self._braking = self._braking and mode is FlightMode.HOLD

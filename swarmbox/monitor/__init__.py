@@ -14,9 +14,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from swarmbox.monitor.targets import rerun_target
+
 MODES = ("auto", "on", "off")
 #: ``run.rerun`` values that name a viewer to connect to rather than a file to write.
-VIEWER_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
 
 
 def wanted(mode: str, *, realtime: bool, multirun: bool, tty: bool | None = None) -> bool:
@@ -28,14 +29,6 @@ def wanted(mode: str, *, realtime: bool, multirun: bool, tty: bool | None = None
     tty = sys.stderr.isatty() if tty is None else tty
     return realtime and tty and not multirun
 
-
-def rerun_target(value: str, run_dir: Path) -> str:
-    """Where ``run.rerun`` streams to: a viewer's URL as given; a relative ``.rrd`` path inside the
-    run directory (like everything else a run writes), an absolute one as given."""
-    if value.startswith(VIEWER_SCHEMES):
-        return value
-    path = Path(value).expanduser()
-    return str(path if path.is_absolute() else run_dir / path)
 
 
 def create(title: str, rate_hz: float, *, dashboard: bool = True, rerun: str | None = None,

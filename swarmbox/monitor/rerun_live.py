@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
-from swarmbox.monitor import VIEWER_SCHEMES
 from swarmbox.monitor.feed import Snapshot
+from swarmbox.monitor.targets import VIEWER_SCHEMES
 from swarmbox.monitor.view import DashboardView
 
 

@@ -8,7 +8,10 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+
+from tests.conftest import sweep_job
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -27,11 +30,13 @@ def swarmbox(*args: str, wait: bool = True):
     return subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=300)
 
 
-def wait_for(path: Path, proc: subprocess.Popen, timeout_s: float = 120.0) -> None:
+def wait_for(path: Path | Callable[[], Path], proc: subprocess.Popen, timeout_s: float = 120.0) -> None:
+    """Wait until ``path`` exists (a callable is asked again each time: a job dir named on creation)."""
+    where = path if callable(path) else (lambda: path)
     deadline = time.monotonic() + timeout_s
-    while not path.exists():
+    while not where().exists():
         assert proc.poll() is None, proc.communicate()
-        assert time.monotonic() < deadline, f"{path} never appeared"
+        assert time.monotonic() < deadline, f"{where()} never appeared"
         time.sleep(0.05)
 
 
@@ -40,7 +45,7 @@ def test_a_second_sweep_into_the_same_directory_is_refused_and_the_first_finishe
     first = swarmbox("-m", *held(flag), "seed=0,1", f"hydra.sweep.dir={sweep}", "~hydra.callbacks.analyze",
                      wait=False)
     try:
-        wait_for(sweep / "0" / "config.yaml", first)   # the first job flies
+        wait_for(lambda: sweep_job(sweep, 0) / "config.yaml", first)   # the first job flies
         second = swarmbox("-m", *held(flag), "seed=0,1", f"hydra.sweep.dir={sweep}",
                           "~hydra.callbacks.analyze")
         flag.touch()
@@ -53,10 +58,10 @@ def test_a_second_sweep_into_the_same_directory_is_refused_and_the_first_finishe
     assert first.returncode == 0, out + err
     summary = json.loads((sweep / "sweep.json").read_text())
     assert summary["counts"] == {"ok": 2}
-    for job in ("0", "1"):
-        manifest = json.loads((sweep / job / "run.json").read_text())
-        assert manifest["status"] == "ok" and manifest["overrides"][-1] == f"seed={job}"
-    assert not (sweep / ".sweep.claim").exists() and not (sweep / "0" / ".claim").exists()
+    for seed in (0, 1):
+        manifest = json.loads((sweep_job(sweep, seed) / "run.json").read_text())
+        assert manifest["status"] == "ok" and manifest["overrides"][-1] == f"seed={seed}"
+    assert not (sweep / ".sweep.claim").exists() and not (sweep_job(sweep, 0) / ".claim").exists()
 
 
 def test_a_second_run_into_a_run_directory_being_written_is_refused(tmp_path):

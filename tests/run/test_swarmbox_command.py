@@ -78,7 +78,9 @@ def test_each_subcommand_imports_only_what_it_needs(command, never):
     assert loaded == "LOADED", f"swarmbox {command} --help loaded {loaded.split()[1:]}"
 
 
+@pytest.mark.replay
 def test_export_writes_a_replay_of_a_run(tmp_path):
+    pytest.importorskip("foxglove_schemas_protobuf", reason="needs the replay extra")
     run = tmp_path / "r"
     assert swarmbox("run", *HOVER, f"run.out_dir={run}").returncode == 0
     proc = swarmbox("export", str(run), "--format", "mcap")

@@ -8,6 +8,7 @@ Only what needs the built swarm (e.g. a fault the backend cannot express) is che
 
 from __future__ import annotations
 
+import importlib.util
 import math
 from dataclasses import fields
 from typing import Any
@@ -89,6 +90,9 @@ def _run(r: DictConfig) -> None:
         _positive(f"run.timeouts_s.{stage}", value)
     for key, value in r.safety.items():
         _positive(f"run.safety.{key}", value)
+    if r.rerun and importlib.util.find_spec("rerun") is None:
+        raise ConfigError("run.rerun needs the replay extra (pip install 'swarmbox[replay]'): "
+                          "the rerun package is not installed")
 
 
 def _link(prefix: str, latency_ms: float, jitter_ms: float, loss_prob: float) -> None:

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import pytest
 
 from swarmbox.monitor import rerun_target, wanted
@@ -117,3 +120,15 @@ def test_live_stream_to_a_rerun_server_over_grpc(run, tmp_path):
             rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
     assert all(rows.get(f"/world/drones/{i}", 0) == manifest["monitor"]["rerun_frames"] for i in range(4))
     assert rows["/events"] >= 4
+
+
+def test_a_rerun_target_without_the_replay_extra_is_refused_before_anything_is_written(tmp_path):
+    """Without the rerun package, run.rerun is a bad input (exit 2, one line), not a failed run."""
+    out = tmp_path / "run"
+    code = ("import sys; sys.modules['rerun'] = None; "   # as if the replay extra were not installed
+            f"sys.argv = ['swarmbox run', 'run.rerun=live.rrd', 'run.out_dir={out}']; "
+            "from swarmbox.run.__main__ import cli; cli()")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.strip().count("\n") == 0 and "swarmbox[replay]" in proc.stderr
+    assert not out.exists()

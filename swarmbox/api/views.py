@@ -28,6 +28,18 @@ def read_only(value: Any) -> Any:
 
 
 def read_only_mission(info: MissionInfo) -> MissionInfo:
-    """``info`` with every mapping frozen (its positions, superiors, values and obstacles)."""
+    """``info`` with every mapping frozen (its positions, superiors, values and obstacles).
+
+    A mission frozen already (by an earlier call) is returned as it is: nothing can change it, so
+    one frozen copy serves every node of a run (a copy per node cost O(N^2) at N drones).
+    """
+    if _frozen(info):
+        return info
     return MissionInfo(info.name, info.swarm_size, read_only(info.initial_positions),
                        read_only(info.superiors), read_only(info.values), read_only(tuple(info.obstacles)))
+
+
+def _frozen(info: MissionInfo) -> bool:
+    """Whether ``info`` came out of :func:`read_only_mission` (its mappings are read-only proxies)."""
+    mappings = (info.initial_positions, info.superiors, info.values, *info.obstacles)
+    return isinstance(info.obstacles, tuple) and all(isinstance(m, MappingProxyType) for m in mappings)

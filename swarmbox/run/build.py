@@ -11,6 +11,7 @@ from hydra.utils import get_class, instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from swarmbox.api import DroneAlgorithm, GroundAlgorithm
+from swarmbox.api.views import read_only_mission
 from swarmbox.core.agent import AgentNode
 from swarmbox.core.clock import ClockSpec, NodeClock, TimeSource
 from swarmbox.core.ground import GroundNode
@@ -150,7 +151,7 @@ def build_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> Swarm:
     clocks = clocks_of(cfg, mission)
     time = TimeSource()
     medium = medium_of(cfg, time, seed, recorder, mission)
-    info = mission.info()
+    info = read_only_mission(mission.info())   # frozen once, shared by every node
 
     def common(node_id: int) -> dict[str, Any]:
         clock = NodeClock(time, clocks.get(node_id, ClockSpec()))

@@ -154,8 +154,11 @@ def _matrix(frame: pd.DataFrame, col: str, ticks: np.ndarray, drones: list[int],
 
 
 def drone_series(run: RunData, opts: DiagnosisOptions | None = None,
-                 span: tuple[float, float] | None = None) -> Series:
-    """Every monitored metric per drone and grid point of the scan span (``run`` must be unified)."""
+                 span: tuple[float, float] | None = None, flow: pd.DataFrame | None = None) -> Series:
+    """Every monitored metric per drone and grid point of the scan span (``run`` must be unified).
+
+    ``flow``: the run's :func:`~swarmbox.analysis.network.message_flow` (with its tick and latency
+    bound) when the caller has it: a 1,000-drone run's messages are then not matched a second time."""
     opts = opts or DiagnosisOptions()
     step = grid_step(run, opts)
     start, end = span or scan_span(run, opts.stage)
@@ -165,9 +168,9 @@ def drone_series(run: RunData, opts: DiagnosisOptions | None = None,
     disc = disc[disc["node"].isin(drones)].assign(tick=nearest_tick(disc[T], step)).rename(
         columns={"node": "drone"})
     values = {m: _matrix(disc, m, ticks, drones) for m in DISC}
-    flow = network.touching(network.message_flow(run.tables["messages"], sampling.tick_s(run),
-                                                 sampling.max_latency_s(run)),
-                            ["t_send", "t_recv", "latency_ms", "delivered", "counted", "lost"])
+    if flow is None:
+        flow = network.message_flow(run.tables["messages"], sampling.tick_s(run), sampling.max_latency_s(run))
+    flow = network.touching(flow, ["t_send", "t_recv", "latency_ms", "delivered", "counted", "lost"])
     flow = flow[flow["agent"].isin(drones)].rename(columns={"agent": "drone"})
     got = flow[flow["delivered"]]
     values["latency_ms"] = _matrix(got.assign(tick=nearest_tick(got["t_recv"], step)), "latency_ms",

@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -29,7 +30,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import yaml
 
-from swarmbox.record.broadcast import BROADCAST, expand_broadcasts
+from swarmbox.record.broadcast import expand_broadcasts
 from swarmbox.record.schema import READABLE_VERSIONS, SCHEMA_VERSION, TABLES
 
 GROUND = -1
@@ -55,14 +56,15 @@ _READERS = 4
 #: Runs whose files total less than this are read one file after another: the pool's hand-offs cost more
 #: CPU than they save in time on a few MB (a 5-drone run, 6 MB in 29 files: ~7 % less CPU to load).
 _POOL_BYTES = 32 * 2**20
-#: Above this many bytes read, the loader hands Arrow's freed read buffers back to the system.
-_RELEASE_BYTES = 64 * 2**20
 #: Text columns read as pandas categoricals: few distinct values in the largest table.
 CATEGORICAL: dict[str, tuple[str, ...]] = {"messages": ("kind", "type", "reason")}
 #: Of those, the ones read straight as Parquet's dictionaries: no string is made per row, and the
-#: broadcast expansion copies indices. ``reason`` is parsed by that expansion: a file with broadcast rows
-#: has it decoded to text first (:func:`_expanded`).
-_READ_AS_DICTIONARY: dict[str, tuple[str, ...]] = {"messages": ("kind", "type", "reason")}
+#: broadcast expansion copies indices. Not ``reason``: a sender's broadcast rows hold their destination
+#: lists there (4 KB each at 1,000 drones), and Arrow decodes a dictionary to text by reserving the
+#: dictionary's mean length for every row: the ground's 20 s of a 1,000-drone hover took 1.5 GB for
+#: 3 MB of text, growing with the run. Read as text it costs its own bytes; it becomes a dictionary in
+#: :func:`_to_frame`.
+_READ_AS_DICTIONARY: dict[str, tuple[str, ...]] = {"messages": ("kind", "type")}
 _DRONE = re.compile(r"drone_(\d+)")
 
 
@@ -179,7 +181,7 @@ def read_arrow(path: Path, table: str, node: int, problems: list[str],
     if version not in READABLE_VERSIONS:
         problems.append(f"{where}: schema version {version}, analyzer reads {', '.join(READABLE_VERSIONS)}")
     if table == "messages":   # version 2's one row per broadcast, as version 1's one per destination
-        data = _expanded(data)
+        data = expand_broadcasts(data)
     arrays, fields = [], []
     for col in wanted:
         typ = _ARROW[col.dtype]
@@ -197,17 +199,6 @@ def read_arrow(path: Path, table: str, node: int, problems: list[str],
     arrays.append(pa.array(np.full(len(data), node, dtype=np.int16)))
     fields.append(pa.field("node", pa.int16()))
     return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
-
-
-def _expanded(data: pa.Table) -> pa.Table:
-    """:func:`expand_broadcasts` of a messages table, its ``reason`` as text where a broadcast lists
-    destinations in it."""
-    names = data.column_names
-    if "reason" in names and "dst" in names and pa.types.is_dictionary(data.column("reason").type) \
-            and pc.any(pc.equal(data.column("dst"), BROADCAST)).as_py():
-        i = names.index("reason")
-        data = data.set_column(i, names[i], data.column(i).cast(pa.string()))
-    return expand_broadcasts(data)
 
 
 def _to_frame(table: str, parts: list[pa.Table]) -> pd.DataFrame:
@@ -305,26 +296,20 @@ def load_run(run_dir: str | Path, columns: dict[str, tuple[str, ...]] | None = N
         if nid is not None and nid not in dirs:
             problems.append(f"node {name} listed in run.json has no logs")
             incomplete |= bool(REQUIRED.get(node_kind(nid)))
-    parts: dict[str, list[pa.Table]] = {t: [] for t in TABLES}
     jobs = [(nid, ndir, t) for nid, ndir in dirs.items() for t in TABLES]
     notes: list[list[str]] = [[] for _ in jobs]   # per file, merged in order: deterministic output
-
-    def read(i: int) -> pa.Table | None:
-        nid, ndir, table = jobs[i]
-        return read_arrow(ndir / f"{table}.parquet", table, nid, notes[i], (columns or {}).get(table))
-
-    if _disk_bytes(ndir / f"{table}.parquet" for _, ndir, table in jobs) < _POOL_BYTES:
-        results = [read(i) for i in range(len(jobs))]
-    else:
-        with ThreadPoolExecutor(max_workers=_READERS) as pool:   # pyarrow reads without the GIL
-            results = list(pool.map(read, range(len(jobs))))
-    # the buffers' sizes: ``nbytes`` works out which bytes slices share, ~1 ms a 5-drone run
-    read_bytes = sum(data.get_total_buffer_size() for data in results if data is not None)
-    for (nid, ndir, table), data, note in zip(jobs, results, notes, strict=True):
+    found = [False] * len(jobs)
+    threaded = _disk_bytes(ndir / f"{table}.parquet" for _, ndir, table in jobs) >= _POOL_BYTES
+    with _arrow_pool(threaded):
+        # one table at a time, its Arrow parts freed once it is a frame: the read and the conversion
+        # then hold two copies of one table at most, not of the whole run
+        tables = {t: _read_table(t, [i for i, job in enumerate(jobs) if job[2] == t], jobs, notes, found,
+                                 (columns or {}).get(t), threaded) for t in TABLES}
+    for (nid, ndir, table), data, note in zip(jobs, found, notes, strict=True):
         problems.extend(note)
-        if data is not None:
-            parts[table].append(data)
-        elif (ndir / f"{table}.parquet").exists():
+        if data:
+            continue
+        if (ndir / f"{table}.parquet").exists():
             incomplete = True    # unreadable (truncated, corrupt): the record is damaged
         elif table in EXPECTED[node_kind(nid)]:
             if not any(p.startswith(f"{ndir.name}/{table}") for p in problems):
@@ -336,16 +321,57 @@ def load_run(run_dir: str | Path, columns: dict[str, tuple[str, ...]] | None = N
     for partial in sorted((run_dir / "logs").rglob("*.partial")):
         incomplete = True
         problems.append(f"{partial.relative_to(run_dir)}: writing never finished")
-    tables = {t: _concat(t, parts.pop(t), (columns or {}).get(t)) for t in list(parts)}
     if "events" not in (columns or {}) and any((run_dir / "logs").glob("drone_*/ulog.json")):
         from swarmbox.analysis.ulog import add_estimator_events  # PX4 runs: EKF2's markers as events
         tables["events"] = add_estimator_events(run_dir, tables["events"], tables.get("state"))
-    # Arrow's allocator keeps the freed Parquet read buffers for reuse: ~0.7 GB of a 1,000-drone run
-    # that the pandas-side analysis would never get back. Return them to the system; a small run's few
-    # MB stay for the next one (giving them back costs a sweep's worker a page fault per 4 KB re-read).
-    if read_bytes > _RELEASE_BYTES:
-        pa.default_memory_pool().release_unused()
     return RunData(run_dir, manifest, config, tables, sorted(dirs), problems, incomplete)
+
+def _read_table(table: str, indices: list[int], jobs: list[tuple[int, Path, str]], notes: list[list[str]],
+                found: list[bool], columns: tuple[str, ...] | None, threaded: bool) -> pd.DataFrame:
+    """Every node's file of ``table`` (the ``jobs`` at ``indices``) as one frame; marks in ``found``
+    which files gave data and puts each file's problems in its ``notes``."""
+
+    def read(i: int) -> pa.Table | None:
+        nid, ndir, _ = jobs[i]
+        return read_arrow(ndir / f"{table}.parquet", table, nid, notes[i], columns)
+
+    if threaded:
+        with ThreadPoolExecutor(max_workers=_READERS) as pool:   # pyarrow reads without the GIL
+            results = list(pool.map(read, indices))
+    else:
+        results = [read(i) for i in indices]
+    for i, data in zip(indices, results, strict=True):
+        found[i] = data is not None
+    return _concat(table, [data for data in results if data is not None], columns)
+
+
+@contextmanager
+def _arrow_pool(large: bool) -> Iterator[None]:
+    """Arrow's allocations while a large run loads come from a pool that gives freed memory back to the
+    system at once.
+
+    The default pool (mimalloc) keeps what the Parquet reads and the conversion to pandas freed: 1.4 GB
+    beyond the 0.9 GB of frames after loading 80 s of a 1,000-drone hover, growing with the run. jemalloc
+    with no decay returns it (where pyarrow has no jemalloc, the system allocator, which returns most).
+    The frames keep their buffers in that pool; the default pool is restored for whatever comes next.
+    A small run's few MB stay in the default pool: a sweep's worker reuses them for the next run.
+    """
+    if not large:
+        yield
+        return
+    before = pa.default_memory_pool()
+    try:
+        pa.jemalloc_set_decay_ms(0)
+        pool = pa.jemalloc_memory_pool()
+    except NotImplementedError:   # a pyarrow built without jemalloc
+        pool = pa.system_memory_pool()
+    pa.set_memory_pool(pool)
+    try:
+        yield
+    finally:
+        pa.set_memory_pool(before)
+        before.release_unused()
+
 
 
 def _disk_bytes(paths: Iterable[Path]) -> int:

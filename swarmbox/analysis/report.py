@@ -177,19 +177,19 @@ def analyze_run(source: str | Path | RunData, opts: AnalysisOptions | None = Non
     mission_values, directions = mission.mission_metrics(run.tables["events"], specs, span.start)
     scalars |= mission_values
     markers = mission.marker_table(run.tables["events"], specs, span.start) if full else pd.DataFrame()
-    finding, alarms = _finding(run, window, opts) if full else (pd.DataFrame(), pd.DataFrame())
+    finding, alarms = _finding(run, window, opts, flow) if full else (pd.DataFrame(), pd.DataFrame())
     return RunAnalysis(run, clocks, window, flow, links, agents, per_drone, timeline, swarm, connectivity,
                        flags, diagnosis, markers, onset, scalars, directions, finding, alarms)
 
 
-def _finding(run: RunData, window: metrics.ExecWindow | None,
-             opts: AnalysisOptions) -> tuple[pd.DataFrame, pd.DataFrame]:
+def _finding(run: RunData, window: metrics.ExecWindow | None, opts: AnalysisOptions,
+             flow: pd.DataFrame | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The onset-agnostic diagnosis over the EXECUTION stage: its first alarm and every alarm episode,
     with the run analysis' minimum deviations. No fault event is read."""
     if window is None:
         return pd.DataFrame([{"detected": False, "alarms": 0}]), pd.DataFrame(columns=dg.ALARM_COLUMNS)
     scan = dg.DiagnosisOptions(min_deviation={k: v for k, v in opts.min_deviation.items() if k in dg.METRICS})
-    series = dg.drone_series(run, scan, (window.start, window.end))
+    series = dg.drone_series(run, scan, (window.start, window.end), flow)
     run.problems.extend(series.problems)
     alarms = dg.scan(series, scan)
     first = {"detected": False, "drone": None, "metric": None, T: np.nan, "value": np.nan, "score": np.nan}

@@ -1,8 +1,8 @@
 """The faster paths of a sweep's per-run analysis equal what they replaced, exactly: the unified times
 for far-apart node ids, the overall network stats, the swarm timeline from one layout, the Theil-Sen
-fit, the categories kept in order, ``reason`` read as a dictionary, the release of read buffers, a small
-run read without the thread pool, the execution window, time orders and progress events from arrays,
-distinct nodes and missing drop reasons in the flow, and the workers' memory settings."""
+fit, the categories kept in order, a small run read without the thread pool, the execution window, time
+orders and progress events from arrays, distinct nodes and missing drop reasons in the flow, and the
+workers' memory settings."""
 
 from __future__ import annotations
 
@@ -13,14 +13,12 @@ import sys
 import numpy as np
 import pandas as pd
 import pyarrow as pa
-import pyarrow.parquet as pq
 import pytest
 
 from swarmbox.analysis import flow, load, metrics, network, unify
 from swarmbox.analysis.load import GROUND, load_run
 from swarmbox.analysis.report import ANALYZED_COLUMNS, SCALAR_COLUMNS
 from swarmbox.analysis.unify import T
-from swarmbox.record.broadcast import BROADCAST
 from tests.analysis.test_array_paths import _old_to_unified
 
 
@@ -115,31 +113,6 @@ def test_categories_end_in_order_of_first_appearance(values, extra):
     got = load._first_seen(series)
     assert list(got.cat.categories) == list(pd.unique(pd.Series(values, dtype=object)))
     assert got.astype(object).tolist() == values
-
-
-def test_reason_read_as_dictionary_equals_the_text(formation_run, monkeypatch):
-    """Broadcast rows' destination lists are decoded for the expansion; the frame is the same."""
-    files = sorted((formation_run / "logs").glob("*/messages.parquet"))
-    assert any((pq.read_table(f, columns=["dst"])["dst"].to_numpy() == BROADCAST).any() for f in files)
-    got = load_run(formation_run, ANALYZED_COLUMNS).tables["messages"]
-    monkeypatch.setitem(load._READ_AS_DICTIONARY, "messages", ("kind", "type"))
-    expected = load_run(formation_run, ANALYZED_COLUMNS).tables["messages"]
-    pd.testing.assert_frame_equal(got, expected, check_exact=True)
-
-
-@pytest.mark.parametrize(("limit", "released"), [(0, 1), (1 << 40, 0)])
-def test_read_buffers_released_only_after_a_large_read(formation_run, monkeypatch, limit, released):
-    calls = []
-
-    class Pool:
-        def release_unused(self) -> None:
-            calls.append(1)
-
-    monkeypatch.setattr(load, "_RELEASE_BYTES", limit)
-    monkeypatch.setattr(pa, "default_memory_pool", Pool)
-    load_run(formation_run, ANALYZED_COLUMNS)
-    assert len(calls) == released
-
 
 
 @pytest.mark.parametrize("columns", [None, SCALAR_COLUMNS])

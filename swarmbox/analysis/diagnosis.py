@@ -170,12 +170,14 @@ def drone_series(run: RunData, opts: DiagnosisOptions | None = None,
     values = {m: _matrix(disc, m, ticks, drones) for m in DISC}
     if flow is None:
         flow = network.message_flow(run.tables["messages"], sampling.tick_s(run), sampling.max_latency_s(run))
-    flow = network.touching(flow, ["t_send", "t_recv", "latency_ms", "delivered", "counted", "lost"])
-    flow = flow[flow["agent"].isin(drones)].rename(columns={"agent": "drone"})
-    got = flow[flow["delivered"]]
-    values["latency_ms"] = _matrix(got.assign(tick=nearest_tick(got["t_recv"], step)), "latency_ms",
-                                   ticks, drones)
-    values["loss_ratio"] = _loss(flow, ticks, drones, opts, step)
+    # only the rows each metric reads, never the whole flow doubled: ~0.5 GB a copy at 1,000 drones
+    got = network.touching(flow, ["t_recv", "latency_ms"], drones, flow["delivered"].to_numpy(dtype=bool))
+    got["tick"] = nearest_tick(got["t_recv"], step)
+    values["latency_ms"] = _matrix(got.rename(columns={"agent": "drone"}), "latency_ms", ticks, drones)
+    del got
+    counted = network.touching(flow, ["t_send", "counted", "lost"], drones,
+                               flow["counted"].to_numpy(dtype=bool))
+    values["loss_ratio"] = _loss(counted.rename(columns={"agent": "drone"}), ticks, drones, opts, step)
     return Series(ticks, drones, values, step, _sparse(values[DISC[0]], step, opts))
 
 

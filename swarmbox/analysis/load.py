@@ -347,14 +347,12 @@ def _read_table(table: str, indices: list[int], jobs: list[tuple[int, Path, str]
 
 @contextmanager
 def _arrow_pool(large: bool) -> Iterator[None]:
-    """Arrow's allocations while a large run loads come from a pool that gives freed memory back to the
-    system at once.
+    """While a large run loads, Arrow allocates from a pool that gives freed memory back at once.
 
-    The default pool (mimalloc) keeps what the Parquet reads and the conversion to pandas freed: 1.4 GB
-    beyond the 0.9 GB of frames after loading 80 s of a 1,000-drone hover, growing with the run. jemalloc
-    with no decay returns it (where pyarrow has no jemalloc, the system allocator, which returns most).
-    The frames keep their buffers in that pool; the default pool is restored for whatever comes next.
-    A small run's few MB stay in the default pool: a sweep's worker reuses them for the next run.
+    The default pool (mimalloc) kept what the reads and the conversion to pandas freed: 1.4 GB beyond
+    the 0.9 GB of frames of an 80 s 1,000-drone hover, growing with the run. jemalloc with no decay
+    returns it (without jemalloc, the system allocator returns most); the default pool is restored
+    after. A small run stays on the default pool: a sweep's worker reuses its few MB for the next run.
     """
     if not large:
         yield

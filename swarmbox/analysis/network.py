@@ -90,20 +90,33 @@ def link_stats(flow: pd.DataFrame, span_s: float) -> pd.DataFrame:
     return grouped_stats(flow, ["src", "dst"], span_s).reset_index()
 
 
-def touching(flow: pd.DataFrame, columns: list[str] | None = None) -> pd.DataFrame:
+def touching(flow: pd.DataFrame, columns: list[str] | None = None, agents: list[int] | None = None,
+             where: np.ndarray | None = None) -> pd.DataFrame:
     """Each message twice: once for its sender (``agent`` = src), once for its destination.
 
     ``columns``: keep only these columns of ``flow`` (besides ``agent``). A large run's flow has
-    millions of rows: doubling only the columns a metric reads keeps the copy small.
+    millions of rows: doubling only the columns a metric reads keeps the copy small. ``agents`` and
+    ``where`` (a mask over the flow's rows) keep only the rows of those agents and messages: the same
+    rows, in the same order, as filtering the whole doubled frame, without making it first (its index
+    is then a fresh range).
     """
     columns = list(flow.columns) if columns is None else columns
-    out = {c: np.concatenate([flow[c].to_numpy(), flow[c].to_numpy()]) for c in columns}
-    out["agent"] = np.concatenate([flow["src"].to_numpy(), flow["dst"].to_numpy()])
+    halves = [flow["src"].to_numpy(), flow["dst"].to_numpy()]
+    keep = [None, None]
+    if agents is not None or where is not None:
+        mask = np.ones(len(flow), dtype=bool) if where is None else np.asarray(where, dtype=bool)
+        keep = [mask & np.isin(half, agents) if agents is not None else mask for half in halves]
+    out = {c: np.concatenate([_rows(flow[c].to_numpy(), k) for k in keep]) for c in columns}
+    out["agent"] = np.concatenate([_rows(half, k) for half, k in zip(halves, keep, strict=True)])
     frame = pd.DataFrame(out, copy=False)
     for c in columns:
         if frame[c].dtype != flow[c].dtype:
             frame[c] = frame[c].astype(flow[c].dtype)
     return frame
+
+
+def _rows(values: np.ndarray, keep: np.ndarray | None) -> np.ndarray:
+    return values if keep is None else values[keep]
 
 
 def _traffic(flow: pd.DataFrame, agents: pd.Index, span_s: float) -> pd.DataFrame:

@@ -38,11 +38,11 @@ def _stamp(t: pd.Series, window_s: float, tick_s: float = TICK_S) -> np.ndarray:
 
 def network_timeline(flow: pd.DataFrame, drones: list[int], window_s: float,
                      tick_s: float = TICK_S) -> pd.DataFrame:
-    both = touching(flow, ["t_send", "latency_ms", "delivered", "counted", "lost"])
-    both = both[both["agent"].isin(drones)]
+    # the drones' rows only, stamped in place: at 1,000 drones each copy of the doubled flow is ~0.5 GB
+    both = touching(flow, ["t_send", "latency_ms", "delivered", "counted", "lost"], agents=drones)
     if both.empty:
         return pd.DataFrame(columns=COLUMNS)
-    both = both.assign(**{T: _stamp(both["t_send"], window_s, tick_s)})
+    both[T] = _stamp(both["t_send"], window_s, tick_s)
     got = both[both["delivered"]]
     lat = got.groupby([T, "agent"])["latency_ms"].mean().rename("latency_ms")
     counted = both[both["counted"]]

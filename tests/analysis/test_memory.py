@@ -128,3 +128,23 @@ def test_the_finding_from_the_run_flow_equals_its_own_matching(formation_run):
     for metric, values in own.values.items():
         np.testing.assert_array_equal(values, given.values[metric], err_msg=metric)
     assert np.isfinite(own.values["latency_ms"]).any() and np.isfinite(own.values["loss_ratio"]).any()
+
+
+@pytest.mark.parametrize("keep", ["agents", "where", "both"])
+def test_touching_filtered_equals_the_doubled_flow_filtered(formation_run, keep):
+    """The drones' and the delivered rows taken while doubling the flow are the rows, in the order, that
+    filtering the whole doubled flow gives (what the timeline and the diagnosis used to make)."""
+    run = load_run(formation_run, ANALYZED_COLUMNS)
+    unify(run)
+    flow = network.message_flow(run.tables["messages"], sampling.tick_s(run), sampling.max_latency_s(run))
+    columns = ["t_send", "latency_ms", "delivered", "lost"]
+    drones = run.drones[1:]   # not every drone: the filter must drop some agents' rows
+    where = flow["delivered"].to_numpy(dtype=bool)
+    agents = drones if keep != "where" else None
+    mask = where if keep != "agents" else None
+    whole = network.touching(flow, columns)
+    expected = whole[(whole["agent"].isin(drones) if agents else True) & (
+        np.concatenate([where, where]) if mask is not None else True)].reset_index(drop=True)
+    got = network.touching(flow, columns, agents, mask)
+    assert 0 < len(got) < len(whole)
+    pd.testing.assert_frame_equal(got, expected, check_exact=True)

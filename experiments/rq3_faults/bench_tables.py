@@ -81,6 +81,13 @@ def false_alarm_table(rows: pd.DataFrame) -> pd.DataFrame:
         drop=True)
 
 
+def false_alarm_summary(rows: pd.DataFrame) -> pd.DataFrame:
+    """:func:`false_alarm_table` for the default detector, the paper's rule and the baseline only."""
+    fa = false_alarm_table(rows)
+    keep = (fa["detector"] == "baseline") | (fa["rule"] == "paper") | (fa["threshold_scale"] == 1.0)
+    return fa[keep].reset_index(drop=True)
+
+
 def composed_table(rows: pd.DataFrame) -> pd.DataFrame:
     """Two faults in one run, default detector, report seeds: each injected truth scored on its own."""
     data = reported(rows)

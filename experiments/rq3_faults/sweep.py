@@ -1,13 +1,14 @@
 """Run plans of the RQ3 study and of the diagnosis benchmark, and their execution.
 
 Every run is one configuration of ``python -m swarmbox.run`` (its overrides are listed in
-``plan.csv``, so any run can be replayed on its own). Runs execute in-process, two at a time in
-joblib workers (the shared machine's cores); a run directory that already holds a finished run is
-skipped, so an interrupted sweep resumes where it stopped. After each run its diagnosis rows
+``plan.csv``, so any run can be replayed on its own). Runs execute in-process, one at a time
+(``--jobs`` for more); a run directory that already holds a finished run is kept, one without
+``run.json`` (interrupted) is flown again, so an interrupted sweep resumes where it stopped and a
+finished one flies nothing. After each run its diagnosis rows
 (:func:`swarmbox.analysis.detection.evaluate_run`) are written next to it as ``diagnosis.parquet``.
 
     python experiments/rq3_faults/sweep.py rq3   OUT      # the paper's 135 runs
-    python experiments/rq3_faults/sweep.py bench OUT      # the detection benchmark
+    python experiments/rq3_faults/sweep.py bench OUT      # the detection benchmark (1,894 runs)
 """
 
 from __future__ import annotations

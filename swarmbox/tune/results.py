@@ -32,7 +32,7 @@ import pandas as pd
 import yaml
 from omegaconf import OmegaConf
 
-from swarmbox.analysis.groupstats import bootstrap_ci, rng
+from swarmbox.analysis.groupstats import bootstrap_ci, denominators, rng
 from swarmbox.analysis.tables import write_table
 from swarmbox.run import interrupt
 from swarmbox.run.record import write_atomic
@@ -56,10 +56,16 @@ def _state(trial: Any) -> str:
 
 
 def _runs(counts: dict[str, int]) -> dict[str, Any]:
-    attempted = sum(counts.values())
-    out = {"runs_attempted": attempted, **{f"runs_{k}": int(counts.get(k, 0)) for k in obj.OUTCOMES}}
-    out["success_rate"] = counts.get("ok", 0) / attempted if attempted else np.nan
-    return out
+    """The sweep tables' denominators (runs per outcome, success rate with its Wilson interval)."""
+    statuses = pd.DataFrame({"status": [s for s, n in counts.items() for _ in range(int(n))]})
+    if statuses.empty:
+        return {"runs_attempted": 0}
+    rows = {r["metric"]: r for r in denominators({}, statuses, LEVEL)}
+    out = {k: int(r["mean"]) for k, r in rows.items() if k.startswith("runs_")}
+    out["runs_missing"] = int(counts.get("missing", 0))
+    rate = rows["success_rate"]
+    return out | {"success_rate": rate["mean"], "success_ci_low": rate["ci_low"],
+                  "success_ci_high": rate["ci_high"]}
 
 
 def metric_cells(values: dict[str, list[float]], metrics: tuple[str, ...], n_boot: int,

@@ -18,7 +18,6 @@ flown again on held-out seeds (:mod:`swarmbox.tune.results`).
 from __future__ import annotations
 
 import logging
-import math
 import sys
 import time
 import warnings
@@ -29,6 +28,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from swarmbox.run import interrupt
 from swarmbox.run.claims import Claim
+from swarmbox.run.progress import _clock  # the sweeps' own h:mm:ss
 from swarmbox.run.record import RunExistsError, hide_in_config
 from swarmbox.tune import objective as obj
 from swarmbox.tune.checks import STUDY_FILE, Plan, TuneInputError, check
@@ -37,13 +37,6 @@ log = logging.getLogger(__name__)
 CONSTRAINT = "runs_not_ok"
 #: overrides that do not change what a study is (a resumed study gives run.resume=true)
 _NOT_IDENTITY = ("run.resume=", "run.progress=")
-
-
-def _clock(seconds: float) -> str:
-    if not math.isfinite(seconds):
-        return "?"
-    s = int(round(seconds))
-    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
 
 
 def make_sampler(name: str, seed: int) -> Any:

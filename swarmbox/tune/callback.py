@@ -13,8 +13,8 @@ values in the worker.
 from __future__ import annotations
 
 import json
-import logging
 import sys
+import traceback
 from pathlib import Path
 from typing import Any
 
@@ -23,8 +23,6 @@ from hydra.types import RunMode
 from omegaconf import DictConfig
 
 from swarmbox.tune.objective import OBJECTIVE_FILE, as_list, run_values
-
-log = logging.getLogger(__name__)
 
 
 def run_dir_of(config: DictConfig) -> Path:
@@ -63,4 +61,5 @@ class TuneCallback(Callback):
         try:
             write_objective(run_dir_of(config), as_list(config.hydra.sweeper.objective))
         except Exception:  # noqa: BLE001 - the sweeper counts a run without objective.json as not ok
-            log.exception("objective of %s could not be computed", run_dir_of(config))
+            print(f"objective of {run_dir_of(config)} could not be computed:\n{traceback.format_exc()}",
+                  file=sys.stderr, flush=True)

@@ -22,7 +22,7 @@ results cover all of its trials.
 from __future__ import annotations
 
 import json
-import logging
+import sys
 import warnings
 from pathlib import Path
 from typing import Any
@@ -37,8 +37,8 @@ from swarmbox.analysis.tables import write_table
 from swarmbox.run import interrupt
 from swarmbox.run.record import write_atomic
 from swarmbox.tune import objective as obj
+from swarmbox.tune.study import defining
 
-log = logging.getLogger(__name__)
 LEVEL = 0.95
 
 
@@ -144,7 +144,7 @@ def best_algo_yaml(config: Any, best: Any, keys: list[str], fixed: tuple[str, ..
     header = [f"# Tuned parameters: trial {best.number} of study "
               f"'{config.hydra.sweeper.study_name}' in {config.hydra.sweep.dir}",
               f"# objective: {', '.join(obj.as_list(config.hydra.sweeper.objective))}",
-              f"# tuned with: {' '.join(fixed) or '(no other overrides)'}"]
+              f"# tuned with: {' '.join(defining(fixed)) or '(no other overrides)'}"]
     if others:
         header.append(f"# not algo parameters, give them on the command line: {' '.join(others)}")
     return "\n".join(header) + "\n" + yaml.safe_dump(body, sort_keys=False)
@@ -159,7 +159,6 @@ def finish(runner: Any, study: Any) -> None:
     write_table(table, out, "trials")
     best = pick_best(study, plan.objective.metrics)
     if best is None:
-        log.warning("no trial had every run ok: no best parameters, no held-out re-evaluation")
         print("tune: no feasible trial (every trial had a run not ok): see tune/trials.md",
               flush=True)
         write_figures(study, plan.objective, keys, out / "figures")
@@ -200,20 +199,25 @@ def feasible_copy(study: Any) -> Any:
     return copy
 
 
-def _plot(name: str, study: Any, feasible: Any, keys: list[str], target: Any, metric: str) -> Any:
+def _plot(name: str, study: Any, feasible: Any, keys: list[str], i: int, objective: obj.Objective) -> Any:
     from optuna.importance import PedAnovaImportanceEvaluator
     from optuna.visualization import matplotlib as ovm
+
+    metric = objective.metrics[i]
+    target = (lambda t: t.values[i]) if len(objective.metrics) > 1 else None
 
     if name == "history":   # every trial, the penalized ones shown as infeasible
         return ovm.plot_optimization_history(study, target=target, target_name=metric)
     if name == "importance":
-        return ovm.plot_param_importances(feasible, evaluator=PedAnovaImportanceEvaluator(), target=target,
-                                          target_name=metric)
+        # PED-ANOVA rates what leads to low target values: a higher-is-better metric is negated
+        sign = -1.0 if objective.directions[i] == "higher" else 1.0
+        return ovm.plot_param_importances(feasible, evaluator=PedAnovaImportanceEvaluator(),
+                                          target=lambda t: sign * t.values[i], target_name=metric)
     return ovm.plot_contour(feasible, params=keys[:2], target=target, target_name=metric)
 
 
 def write_figures(study: Any, objective: obj.Objective, keys: list[str], out: Path) -> list[Path]:
-    """Optuna's matplotlib plots, per objective; a plot its data cannot make is skipped with a log line."""
+    """Optuna's matplotlib plots, per objective; a plot its data cannot make is skipped, saying why."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -223,18 +227,18 @@ def write_figures(study: Any, objective: obj.Objective, keys: list[str], out: Pa
     feasible = feasible_copy(study)
     written = []
     for i, m in enumerate(objective.metrics):
-        target = (lambda t, i=i: t.values[i]) if len(objective.metrics) > 1 else None
         names = ("history", "importance", "contour") if len(keys) > 1 else ("history", "importance")
         for name in names:
             path = out / f"{name}_{m}.png"
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")   # Optuna marks its matplotlib plots experimental
-                    ax = _plot(name, study, feasible, keys, target, m)
+                    ax = _plot(name, study, feasible, keys, i, objective)
                 fig = (ax.flat[0] if hasattr(ax, "flat") else ax).figure
                 fig.savefig(path, dpi=110, bbox_inches="tight")
                 plt.close(fig)
                 written.append(path)
             except (ValueError, RuntimeError, ZeroDivisionError) as exc:
-                log.warning("figure %s skipped: %s", path.name, exc)
+                # printed, not logged: Hydra's logging setup disables the loggers made before it
+                print(f"tune: figure {path.name} skipped: {exc}", file=sys.stderr, flush=True)
     return written

@@ -17,7 +17,6 @@ flown again on held-out seeds (:mod:`swarmbox.tune.results`).
 
 from __future__ import annotations
 
-import logging
 import sys
 import time
 import warnings
@@ -33,7 +32,6 @@ from swarmbox.run.record import RunExistsError, hide_in_config
 from swarmbox.tune import objective as obj
 from swarmbox.tune.checks import STUDY_FILE, Plan, TuneInputError, check
 
-log = logging.getLogger(__name__)
 CONSTRAINT = "runs_not_ok"
 #: overrides that do not change what a study is (a resumed study gives run.resume=true)
 _NOT_IDENTITY = ("run.resume=", "run.progress=")
@@ -47,11 +45,16 @@ def make_sampler(name: str, seed: int) -> Any:
     return samplers[name](seed=seed)
 
 
+def defining(fixed: tuple[str, ...]) -> list[str]:
+    """The fixed overrides that make the runs what they are (not run.resume, run.progress)."""
+    return [f for f in fixed if not f.lstrip("+~").startswith(_NOT_IDENTITY)]
+
+
 def identity(plan: Plan) -> dict[str, Any]:
     """What makes a study what it is: a resume must match it."""
-    fixed = [f for f in plan.space.fixed if not f.lstrip("+~").startswith(_NOT_IDENTITY)]
     return {"objective": list(plan.objective.metrics), "directions": list(plan.objective.directions),
-            "space": plan.space.describe(), "fixed": sorted(fixed), "seeds": list(plan.seeds)}
+            "space": plan.space.describe(), "fixed": sorted(defining(plan.space.fixed)),
+            "seeds": list(plan.seeds)}
 
 
 def open_study(root: Path, name: str, plan: Plan, sampler: Any) -> Any:

@@ -20,7 +20,8 @@ def case(name: str, overrides: list[str], says: str, *marks) -> object:
 CASES = [
     case("metric", [P_REP, "hydra.sweeper.objective=flock_orderr_mean"],
          "hydra.sweeper.objective: unknown metric 'flock_orderr_mean' for algo flocking"),
-    case("metric-of-another-algo", [P_REP, "algo=hover"], "unknown metric 'flock_order_mean' for algo hover"),
+    case("metric-of-another-algo", ["algo=hover", "algo.params.hover_s=interval(1,3)"],
+         "unknown metric 'flock_order_mean' for algo hover"),
     case("group-option", [P_REP, "algo=flockingg"], "Could not find 'algo/flockingg'"),
     case("undeclared-key", ["algo.params.p_repp=interval(0.1,2)"],
          "algo.params.p_repp: algorithm 'flocking' declares no parameter 'p_repp'"),

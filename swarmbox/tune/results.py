@@ -37,7 +37,6 @@ from swarmbox.analysis.tables import write_table
 from swarmbox.run import interrupt
 from swarmbox.run.record import write_atomic
 from swarmbox.tune import objective as obj
-from swarmbox.tune.study import defining
 
 LEVEL = 0.95
 
@@ -131,7 +130,7 @@ def _span(seeds: list[Any]) -> str:
     return f"{min(seeds)}..{max(seeds)}" if seeds else ""
 
 
-def best_algo_yaml(config: Any, best: Any, keys: list[str], fixed: tuple[str, ...]) -> str:
+def best_algo_yaml(config: Any, best: Any, keys: list[str], fixed: list[str]) -> str:
     """The algo config with the best parameters, ready to use as ``conf/algo/<name>.yaml``."""
     algo = OmegaConf.to_container(config.algo, resolve=False)
     for k in keys:
@@ -144,7 +143,7 @@ def best_algo_yaml(config: Any, best: Any, keys: list[str], fixed: tuple[str, ..
     header = [f"# Tuned parameters: trial {best.number} of study "
               f"'{config.hydra.sweeper.study_name}' in {config.hydra.sweep.dir}",
               f"# objective: {', '.join(obj.as_list(config.hydra.sweeper.objective))}",
-              f"# tuned with: {' '.join(defining(fixed)) or '(no other overrides)'}"]
+              f"# tuned with: {' '.join(fixed) or '(no other overrides)'}"]
     if others:
         header.append(f"# not algo parameters, give them on the command line: {' '.join(others)}")
     return "\n".join(header) + "\n" + yaml.safe_dump(body, sort_keys=False)
@@ -174,7 +173,7 @@ def finish(runner: Any, study: Any) -> None:
         {"trial": best.number, "params": best.params, "overrides": overrides,
          "objective": dict(zip(plan.objective.metrics, plan.objective.directions, strict=True)),
          "tuning": held.iloc[0].to_dict(), "heldout": held.iloc[1].to_dict()}, indent=2, default=str))
-    write_atomic(out / "best_algo.yaml", best_algo_yaml(runner.config, best, keys, plan.space.fixed))
+    write_atomic(out / "best_algo.yaml", best_algo_yaml(runner.config, best, keys, plan.space.defining()))
     write_figures(study, plan.objective, keys, out / "figures")
     _print_best(best, held, plan.objective, out)
 

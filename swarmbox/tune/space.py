@@ -65,6 +65,10 @@ class Space:
     dimensions: tuple[Dimension, ...]
     fixed: tuple[str, ...]          # overrides every job gets as written
 
+    def defining(self) -> list[str]:
+        """The fixed overrides that make the runs what they are (``run.resume``, ``run.progress`` do not)."""
+        return [f for f in self.fixed if not f.lstrip("+~").startswith(("run.resume=", "run.progress="))]
+
     def distributions(self) -> dict[str, Any]:
         return {d.key: d.distribution() for d in self.dimensions}
 

@@ -33,8 +33,6 @@ from swarmbox.tune import objective as obj
 from swarmbox.tune.checks import STUDY_FILE, Plan, TuneInputError, check
 
 CONSTRAINT = "runs_not_ok"
-#: overrides that do not change what a study is (a resumed study gives run.resume=true)
-_NOT_IDENTITY = ("run.resume=", "run.progress=")
 
 
 def make_sampler(name: str, seed: int) -> Any:
@@ -45,15 +43,10 @@ def make_sampler(name: str, seed: int) -> Any:
     return samplers[name](seed=seed)
 
 
-def defining(fixed: tuple[str, ...]) -> list[str]:
-    """The fixed overrides that make the runs what they are (not run.resume, run.progress)."""
-    return [f for f in fixed if not f.lstrip("+~").startswith(_NOT_IDENTITY)]
-
-
 def identity(plan: Plan) -> dict[str, Any]:
     """What makes a study what it is: a resume must match it."""
     return {"objective": list(plan.objective.metrics), "directions": list(plan.objective.directions),
-            "space": plan.space.describe(), "fixed": sorted(defining(plan.space.fixed)),
+            "space": plan.space.describe(), "fixed": sorted(plan.space.defining()),
             "seeds": list(plan.seeds)}
 
 

@@ -162,7 +162,7 @@ def run_study(config: DictConfig, launcher: Any) -> Any:
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     try:
-        plan = check(config)
+        plan = check(config, ends=False)   # the tuner's callback checked them all before the study
     except TuneInputError as exc:
         _refuse(f"{exc} (nothing was run or written)")
     root = Path(str(config.hydra.sweep.dir))

@@ -121,6 +121,10 @@ def check(config: DictConfig, ends: bool = True) -> Plan:
     ``ends=False`` leaves out the run checks at the ends of the ranges (the slow part, done once)."""
     s = config.hydra.sweeper
     _settings(s)
+    callbacks = config.hydra.get("callbacks") or {}
+    if not any(str(c.get("_target_", "")).endswith(".TuneCallback") for c in callbacks.values()):
+        raise TuneInputError("hydra.callbacks.tune is missing: it computes each run's objective in its "
+                             "worker (hydra/sweeper=tune brings it; do not remove it)")
     try:
         space = parse(OmegaConf.to_container(s.params) if s.params else None,
                       list(config.hydra.overrides.task))

@@ -25,8 +25,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from swarmbox.run import interrupt
-from swarmbox.run.claims import Claim
+from swarmbox.run import claims, interrupt
 from swarmbox.run.progress import _clock  # the sweeps' own h:mm:ss
 from swarmbox.run.record import RunExistsError, hide_in_config
 from swarmbox.tune import objective as obj
@@ -161,13 +160,15 @@ def run_study(config: DictConfig, launcher: Any) -> Any:
     from swarmbox.tune import results
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    try:
-        plan = check(config, ends=False)   # the tuner's callback checked them all before the study
-    except TuneInputError as exc:
-        _refuse(f"{exc} (nothing was run or written)")
     root = Path(str(config.hydra.sweep.dir))
     try:
-        claim = Claim(root, ".tune.claim", "tuning study").acquire()
+        plan = check(config, ends=False)   # the tuner's callback checked them all before the study
+    except TuneInputError as exc:   # only without that callback: undo the sweep's claim on its directory
+        (root / ".sweep.claim").unlink(missing_ok=True)
+        claims.drop_if_made(root)
+        _refuse(f"{exc} (nothing was run or written)")
+    try:
+        claim = claims.Claim(root, ".tune.claim", "tuning study").acquire()
     except (RunExistsError, OSError) as exc:
         _refuse(f"{exc}")
     try:

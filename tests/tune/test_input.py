@@ -37,6 +37,7 @@ CASES = [
          "held-out seeds 3..12 overlap the tuning seeds 0..4", SLOW),
     case("typo", [P_REP, "hydra.sweeper.n_trialz=3"], "Key 'n_trialz' not in 'TuneSweeperConf'", SLOW),
     case("no-space", [], "nothing to search", SLOW),
+    case("no-callback", [P_REP, "~hydra.callbacks.tune"], "hydra.callbacks.tune is missing", SLOW),
 ]
 
 

@@ -229,8 +229,15 @@ class HeldSetpoint:
 
 #: PX4's geofence action on a breach (GF_ACTION): 3 = return to launch
 PX4_GF_ACTION_RTL = 3
+#: PX4's breach prediction (GF_PREDICT) off, whatever the PX4 version's default: it assumes the
+#: vehicle still accelerates at the controller's limit (MPC_ACC_*) when it starts braking, which a
+#: drone the monitor is slowing down does not. PX4's layer acts on the position it measures.
+PX4_GF_PREDICT_OFF = 0
 PX4_FENCE_MARGIN_M = 5.0       # PX4's own fence sits this far outside the monitor's (horizontal)
-PX4_CEILING_MARGIN_M = 2.0     # ... and above its ceiling
+# ... and above its ceiling. PX4 measures altitude above the home it keeps from its global estimate,
+# which in SIH wandered 3 m within one flight (GLOBAL_POSITION_INT's home, alt - relative_alt) while
+# the local estimate held still: at 2 m PX4 reported a breach at 7.98 m under an 8 m ceiling.
+PX4_CEILING_MARGIN_M = 5.0
 
 
 def px4_geofence(limits: SafetyLimits, home_ned_m: tuple[float, float, float]) -> dict[str, float | int]:
@@ -242,4 +249,4 @@ def px4_geofence(limits: SafetyLimits, home_ned_m: tuple[float, float, float]) -
     n, e, d = home_ned_m
     return {"GF_MAX_HOR_DIST": round(limits.geofence_radius_m + math.hypot(n, e) + PX4_FENCE_MARGIN_M, 3),
             "GF_MAX_VER_DIST": round(limits.max_alt_m + d + PX4_CEILING_MARGIN_M, 3),
-            "GF_ACTION": PX4_GF_ACTION_RTL}
+            "GF_ACTION": PX4_GF_ACTION_RTL, "GF_PREDICT": PX4_GF_PREDICT_OFF}

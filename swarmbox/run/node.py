@@ -37,15 +37,19 @@ from swarmbox.api import DroneAlgorithm, GroundAlgorithm
 from swarmbox.core.agent import AgentNode
 from swarmbox.core.clock import ClockSpec, NodeClock, TimeSource
 from swarmbox.core.messages import GROUND_ID
+from swarmbox.core.rows import TEXTS
 from swarmbox.core.stages import Stage
 from swarmbox.net.auth import KEY_ENV, AuthSpec
 from swarmbox.net.medium import LinkSpec
 from swarmbox.net.zenoh_medium import ZenohMedium
 from swarmbox.record.schema import node_name
 from swarmbox.record.writer import Recorder
-from swarmbox.run import build, mission, node_faults, node_logs
+from swarmbox.run import build, mission, node_faults, node_logs, record
 from swarmbox.run.params import typed_params
 from swarmbox.run.runner import write_atomic
+
+#: bytes reserved for a node's outcome (``nodes/<node>.json``, about 1 kB) before its logs are written
+OUTCOME_RESERVE = 16 << 10
 
 
 class NodeSetupError(ValueError):
@@ -105,6 +109,11 @@ class NodeProcess:
         self.stop_requested = ""
         self.rejected: dict[str, int] = {}
         self.incarnation = next_incarnation(run_dir, self.name)
+        # the node's outcome, its space reserved before any log is written (a full disk keeps it)
+        self.record = record.RunJson(run_dir / "nodes", name=f"{self.name}.json",
+                                     reserve_bytes=OUTCOME_RESERVE)
+        self.record.reserve()
+        self.texts_before = TEXTS.overflowed
         seed = int(cfg.seed)
         m = self.mission = mission.load(cfg, build.rng_for(seed, "dataset"))
         if node_id != GROUND_ID and node_id not in m.drone_ids:
@@ -249,10 +258,19 @@ class NodeProcess:
                 self.backend.close()
         finally:
             self.medium.close()
-            self.recorder.close()
-            node_logs.append_segments(self.run_dir, self.name, self.segments)
-            write_atomic(self.run_dir / "nodes" / f"{self.name}.json",
-                         json.dumps(result, indent=2, sort_keys=True))
+            try:
+                self.recorder.close()
+            except OSError as exc:   # a full disk or a file size limit: named in the outcome
+                record.add_reason(result, str(exc), fail=True)
+            if self.recorder.not_written:
+                result["tables_not_written"] = self.recorder.not_written
+            problems = record.texts_overflowed(self.texts_before)
+            if problems:
+                result["problems"] = problems
+            try:
+                node_logs.append_segments(self.run_dir, self.name, self.segments)
+            finally:
+                self.record.write(result)
 
 
 def ground_monitor(cfg: DictConfig, mission_name: str, run_dir: Path) -> Any:

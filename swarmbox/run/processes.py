@@ -306,6 +306,11 @@ def _finish(manifest: dict[str, Any], nodes: NodeSet | None, sitl: Any, start: f
             nodes.stop()
             manifest["node_results"] = manifest["node_results"] or nodes.results()
             g = manifest["node_results"].get(node_name(GROUND_ID), {})
+            for name, res in manifest["node_results"].items():   # what a node's own log writing met
+                manifest["problems"] += [f"{name}: {p}" for p in res.get("problems", [])]
+                if res.get("tables_not_written"):
+                    manifest["tables_not_written"] = [*manifest.get("tables_not_written", []),
+                                                      *res["tables_not_written"]]
             if not manifest["ticks"]:   # stopped early: how far the ground got
                 manifest.update(ticks=g.get("ticks", 0), sim_time_s=g.get("sim_time_s", 0.0))
         if sitl is not None:

@@ -25,6 +25,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from swarmbox import __version__
 from swarmbox.core.messages import GROUND_ID
+from swarmbox.core.rows import TEXTS
 from swarmbox.hal.launch import KEY_VARS
 from swarmbox.record.schema import SCHEMA_VERSION, node_name
 
@@ -259,6 +260,14 @@ def new_manifest(cfg: DictConfig, choices: dict[str, str], overrides: list[str],
     return manifest
 
 
+def texts_overflowed(before: int) -> list[str]:
+    """The problem to record when texts were logged as the overflow marker since ``before``."""
+    if TEXTS.overflowed <= before:
+        return []
+    return [f"{TEXTS.overflowed - before} texts logged as {TEXTS.OVERFLOW!r}: the text table "
+            f"holds {TEXTS.limit} texts"]
+
+
 def add_reason(manifest: dict[str, Any], text: str, *, fail: bool = False) -> None:
     """Append ``text`` to the reason; ``fail``: the run is ``failed`` whatever it was."""
     manifest["reason"] = "; ".join(filter(None, [manifest.get("reason", ""), text]))
@@ -303,17 +312,19 @@ class RunJson:
 
     RESERVE = 256 << 10
 
-    def __init__(self, run_dir: Path, secrets: Iterable[str] = ()) -> None:
-        self.path = run_dir / "run.json"
-        self.tmp = run_dir / ".run.json.tmp"
+    def __init__(self, run_dir: Path, secrets: Iterable[str] = (), *, name: str = "run.json",
+                 reserve_bytes: int | None = None) -> None:
+        self.path = run_dir / name
+        self.tmp = run_dir / f".{name}.tmp"
         self.secrets = set(secrets)
+        self.reserve_bytes = reserve_bytes
         self.reserved = False
 
     def reserve(self) -> None:
         """Claim the space (a failure is no error: the run then writes its record as usual)."""
         try:
             with open(self.tmp, "wb") as f:
-                f.write(b" " * self.RESERVE)
+                f.write(b" " * (self.reserve_bytes or self.RESERVE))
                 f.flush()
                 os.fsync(f.fileno())
             self.reserved = True

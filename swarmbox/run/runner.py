@@ -156,10 +156,7 @@ def execute(cfg: DictConfig, run_dir: Path, choices: dict[str, str], overrides: 
         _stop_watchers(manifest, dog, progress, monitor, swarm)
         if manifest["status"] in ("failed", "interrupted"):
             _reached(manifest, swarm, started)
-        if TEXTS.overflowed > refused_texts:
-            manifest["problems"].append(
-                f"{TEXTS.overflowed - refused_texts} texts logged as {TEXTS.OVERFLOW!r}: the text table "
-                f"holds {TEXTS.limit} texts")
+        manifest["problems"] += record.texts_overflowed(refused_texts)
         if not discard:
             try:
                 _close(manifest, swarm, recorder, run_json)

@@ -115,7 +115,7 @@ def test_px4_geofence_sits_just_outside_the_envelope_measured_from_each_home():
     lim = SafetyLimits(geofence_radius_m=50.0, max_alt_m=10.0)
     gf = px4_geofence(lim, (30.0, 40.0, 0.0))   # 50 m from the origin: 100 m of fence beyond it
     assert gf == {"GF_MAX_HOR_DIST": 100.0 + PX4_FENCE_MARGIN_M,
-                  "GF_MAX_VER_DIST": 10.0 + PX4_CEILING_MARGIN_M, "GF_ACTION": 3}
+                  "GF_MAX_VER_DIST": 10.0 + PX4_CEILING_MARGIN_M, "GF_ACTION": 3, "GF_PREDICT": 0}
     assert px4_geofence(lim, (0.0, 0.0, -4.0))["GF_MAX_VER_DIST"] == 6.0 + PX4_CEILING_MARGIN_M
     env = instance_env((47.0, 8.0, 488.0), SitlOptions(params={"GF_ACTION": 2}), 1.0, {}, gf)
     assert env["PX4_PARAM_GF_MAX_HOR_DIST"] == "105.0" and env["PX4_PARAM_GF_ACTION"] == "2"   # user's wins

@@ -90,3 +90,30 @@ def test_a_record_bigger_than_its_reservation_on_a_full_disk_is_written_without_
     assert "node_results" not in written
     assert written["problems"] == ["run.json shortened: No space left on device"]
     assert not (small_disk / ".run.json.tmp").exists()
+
+
+def test_a_node_process_that_cannot_write_its_logs_says_so_in_run_json(tmp_path):
+    """The processes runtime: each node writes its own tables; a node whose tables do not fit fails
+    the run, and run.json names the node, the tables and the cause (each node's outcome has its space
+    reserved before its logs, so it is never the thing that is lost)."""
+    limit = 20 << 10   # each drone's state table (~23 kB here) and the ground's messages (~31 kB)
+    run_dir = tmp_path / "run"
+    env = {k: v for k, v in os.environ.items() if k != "SWARMBOX_NET_KEY"}
+    proc = subprocess.run([sys.executable, "-m", "swarmbox.run", *HOVER, "run.runtime=processes", "backend=mavsim",
+                           f"run.out_dir={run_dir}"], capture_output=True, text=True,
+                          env=dict(env, PYTHONPATH=str(ROOT)), timeout=300,
+                          preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit)))
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    manifest = json.loads((run_dir / "run.json").read_text())
+    assert manifest["status"] == "failed"
+    missing = manifest["tables_not_written"]
+    assert {f"drone_{i}/state.parquet" for i in range(4)} <= set(missing), missing
+    for node in {t.split("/")[0] for t in missing}:
+        outcome = manifest["node_results"][node]
+        tables = [t for t in missing if t.startswith(f"{node}/")]
+        assert outcome["status"] == "failed" and outcome["tables_not_written"] == tables
+        assert f"{', '.join(tables)} not written: File too large" in manifest["reason"]
+        assert node == "ground" or f"{node} failed" in manifest["reason"]
+    for t in missing:
+        assert not (run_dir / "logs" / t).exists()
+    assert not list(run_dir.rglob("*.tmp")) and not list(run_dir.rglob("*.partial"))

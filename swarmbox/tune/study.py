@@ -153,6 +153,14 @@ def _refuse(reason: str) -> None:
     sys.exit(2)
 
 
+def _refuse_study(root: Path, reason: str) -> None:
+    """Bad input found once the sweep has claimed its directory: the claim undone, the directory
+    removed if this command made it and it holds nothing else, one line, exit 2."""
+    (root / ".sweep.claim").unlink(missing_ok=True)
+    claims.drop_if_made(root)
+    _refuse(f"{reason} (nothing was run or written)")
+
+
 def run_study(config: DictConfig, launcher: Any) -> Any:
     """The whole study: checks, claim, trials, then the held-out re-evaluation and the results."""
     import optuna
@@ -163,17 +171,19 @@ def run_study(config: DictConfig, launcher: Any) -> Any:
     root = Path(str(config.hydra.sweep.dir))
     try:
         plan = check(config, ends=False)   # the tuner's callback checked them all before the study
-    except TuneInputError as exc:   # only without that callback: undo the sweep's claim on its directory
-        (root / ".sweep.claim").unlink(missing_ok=True)
-        claims.drop_if_made(root)
-        _refuse(f"{exc} (nothing was run or written)")
+    except TuneInputError as exc:   # only without that callback
+        _refuse_study(root, str(exc))
     try:
         claim = claims.Claim(root, ".tune.claim", "tuning study").acquire()
     except (RunExistsError, OSError) as exc:
         _refuse(f"{exc}")
+    s = config.hydra.sweeper
     try:
-        s = config.hydra.sweeper
         study = open_study(root, str(s.study_name), plan, make_sampler(str(s.sampler), int(s.sampler_seed)))
+    except TuneInputError as exc:
+        claim.release()
+        _refuse_study(root, str(exc))
+    try:
         public = OmegaConf.create(OmegaConf.to_container(config))
         hide_in_config(public)
         OmegaConf.save(public, root / "multirun.yaml")
@@ -181,7 +191,5 @@ def run_study(config: DictConfig, launcher: Any) -> Any:
         if runner.optimise(study):
             results.finish(runner, study)
         return study
-    except TuneInputError as exc:
-        _refuse(str(exc))
     finally:
         claim.release()

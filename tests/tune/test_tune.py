@@ -141,3 +141,14 @@ def test_a_study_in_a_directory_that_holds_one_needs_resume(study):
         f"error: {study / 'study.db'} holds a study: continue it with run.resume=true, or choose another "
         "hydra.sweep.dir (nothing was run or written)")
     assert (study / "study.db").stat().st_mtime_ns == mtime
+
+
+def test_a_resume_with_another_objective_is_refused_and_changes_nothing(study):
+    before = {p.name: p.stat().st_mtime_ns for p in study.iterdir()}
+    proc = tune(study, "run.resume=true", "hydra.sweeper.objective=flock_order_mean")
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines()[-1] == (
+        f"error: {study / 'study.db'}: study 'tune' was started with another directions, objective "
+        "(directions=['higher', 'higher'], objective=['flock_order_mean', 'flock_min_separation_m_min']); "
+        "resume it with the same settings or choose another hydra.sweep.dir (nothing was run or written)")
+    assert {p.name: p.stat().st_mtime_ns for p in study.iterdir()} == before

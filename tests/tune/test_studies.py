@@ -8,6 +8,7 @@ import math
 import os
 import secrets
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -118,3 +119,35 @@ def test_a_study_on_the_sim_px4_backend(tmp_path):
     table = trials(root)
     assert list(table["state"]) == ["ok"] and table.loc[0, "runs_ok"] == 2
     assert json.loads((root / "tune" / "best.json").read_text())["trial"] == 0
+
+
+@pytest.mark.slow
+def test_a_study_stopped_by_ctrl_c_resumes_and_flies_no_finished_run_again(tmp_path):
+    root = tmp_path / "sweep"
+    proc = subprocess.Popen([sys.executable, "-m", "swarmbox.run", "-m", *STUDY, f"hydra.sweep.dir={root}",
+                             "hydra.sweeper.n_trials=3"], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 300
+        while not (root / "trial0001_seed0").exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        os.killpg(proc.pid, signal.SIGINT)            # Ctrl-C: the process group, as a terminal does
+        proc.communicate(timeout=300)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130
+    stored = optuna.load_study(study_name="tune", storage=f"sqlite:///{root / 'study.db'}")
+    finished = {t.number for t in stored.trials if t.state.name == "COMPLETE"}
+    flying = {t.number for t in stored.trials if t.state.name == "RUNNING"}
+    assert 0 in finished and flying                   # stopped mid-trial
+    kept = {p.parent.name: p.stat().st_mtime_ns for p in root.glob("*/run.json")
+            if json.loads(p.read_text())["status"] == "ok"}
+    assert not (root / "tune").exists()               # no results from a study that did not finish
+    again = tune(root, "hydra.sweeper.n_trials=3", "run.resume=true")
+    assert again.returncode == 0, again.stderr[-3000:]
+    table = trials(root).set_index("trial")
+    assert (table["state"] == "ok").sum() == 3
+    assert set(table.index[table["state"] == "stopped"]) == flying
+    assert set(table["resumes"].dropna().astype(int)) == flying           # their parameters asked again
+    again = {p.parent.name: p.stat().st_mtime_ns for p in root.glob("*/run.json") if p.parent.name in kept}
+    assert again == kept                              # no finished run flown again

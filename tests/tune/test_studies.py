@@ -149,5 +149,5 @@ def test_a_study_stopped_by_ctrl_c_resumes_and_flies_no_finished_run_again(tmp_p
     assert (table["state"] == "ok").sum() == 3
     assert set(table.index[table["state"] == "stopped"]) == flying
     assert set(table["resumes"].dropna().astype(int)) == flying           # their parameters asked again
-    again = {p.parent.name: p.stat().st_mtime_ns for p in root.glob("*/run.json") if p.parent.name in kept}
-    assert again == kept                              # no finished run flown again
+    now = {p.parent.name: p.stat().st_mtime_ns for p in root.glob("*/run.json") if p.parent.name in kept}
+    assert now == kept                              # no finished run flown again

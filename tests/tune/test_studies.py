@@ -75,27 +75,30 @@ def test_a_second_invocation_on_a_running_study_is_refused_and_the_study_is_inta
     assert (table["runs_ok"] == 2).all()
 
 
-def ray_python() -> str:
-    """The interpreter of an environment with the ray extra: this one, or SWARMBOX_RAY_PYTHON."""
-    python = os.environ.get("SWARMBOX_RAY_PYTHON", sys.executable)
-    found = subprocess.run([python, "-c", "import hydra_plugins.hydra_ray_launcher, optuna"],
-                           capture_output=True, check=False)
+def extras_python(plugin: str, extra: str) -> str:
+    """The interpreter of an environment with a launcher extra: this one, or SWARMBOX_EXTRAS_PYTHON."""
+    python = os.environ.get("SWARMBOX_EXTRAS_PYTHON", sys.executable)
+    found = subprocess.run([python, "-c", f"import hydra_plugins.{plugin}, optuna"], capture_output=True,
+                           check=False)
     if found.returncode:
-        pytest.skip("needs pip install -e '.[test,ray]' (or SWARMBOX_RAY_PYTHON pointing at such a venv)")
+        pytest.skip(f"needs pip install -e '.[test,{extra}]' (or SWARMBOX_EXTRAS_PYTHON naming such a venv)")
     return python
+
+
+#: the study without its launcher settings
+BASE = [o for o in STUDY if not o.startswith(("hydra/launcher=", "hydra.launcher."))]
 
 
 @pytest.mark.slow
 def test_the_ray_launcher_on_a_local_cluster_gives_the_same_study(tmp_path):
-    python = ray_python()
+    python = extras_python("hydra_ray_launcher", "ray")
     joblib = tune(tmp_path / "joblib", *SMALL)
     assert joblib.returncode == 0, joblib.stderr[-3000:]
     temp_root = Path(tempfile.mkdtemp(prefix="sbray-"))
     env = {**os.environ, "PYTHONPATH": str(ROOT), "RAY_USAGE_STATS_ENABLED": "0", "RAY_AUTH_MODE": "token",
            "RAY_AUTH_TOKEN": secrets.token_hex(32), "RAY_TMPDIR": str(temp_root)}
-    base = [o for o in STUDY if not o.startswith("hydra/launcher=") and not o.startswith("hydra.launcher.")]
     try:
-        ray = subprocess.run([python, "-m", "swarmbox.run", "-m", *base, "hydra/launcher=ray",
+        ray = subprocess.run([python, "-m", "swarmbox.run", "-m", *BASE, "hydra/launcher=ray",
                               "+hydra.launcher.ray.init.num_cpus=2",
                               "+hydra.launcher.ray.init.include_dashboard=false",
                               f"hydra.sweep.dir={tmp_path / 'ray'}", *SMALL],
@@ -106,6 +109,28 @@ def test_the_ray_launcher_on_a_local_cluster_gives_the_same_study(tmp_path):
     assert "Ray Launcher is launching" in ray.stdout + ray.stderr
     pd.testing.assert_frame_equal(trials(tmp_path / "joblib"), trials(tmp_path / "ray"))
     assert (tmp_path / "ray" / "tune" / "best.json").is_file()
+
+
+@pytest.mark.slow
+def test_the_submitit_local_executor_gives_the_same_study(tmp_path):
+    python = extras_python("hydra_submitit_launcher", "slurm")
+    joblib = tune(tmp_path / "joblib", *SMALL)
+    assert joblib.returncode == 0, joblib.stderr[-3000:]
+    sub = tune(tmp_path / "sub", *SMALL, "hydra/launcher=submitit_local", "hydra.launcher.timeout_min=10",
+               base=BASE, python=python)
+    assert sub.returncode == 0, sub.stderr[-3000:]
+    assert (tmp_path / "sub" / ".submitit").is_dir()                  # the runs went through submitit
+    pd.testing.assert_frame_equal(trials(tmp_path / "joblib"), trials(tmp_path / "sub"))
+
+
+@pytest.mark.slow
+def test_trials_asked_in_batches_fly_together_and_the_study_stops_at_n_trials(tmp_path):
+    proc = tune(tmp_path / "sweep", "hydra.sweeper.n_trials=3", "hydra.sweeper.batch_trials=2",
+                "hydra.sweeper.sampler=random", "hydra.sweeper.seeds=2", "hydra.sweeper.heldout_seeds=1")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "is launching 4 jobs" in proc.stdout and "is launching 2 jobs" in proc.stdout   # 2 trials, then 1
+    table = trials(tmp_path / "sweep")
+    assert list(table["trial"]) == [0, 1, 2] and set(table["state"]) == {"ok"}
 
 
 @pytest.mark.slow

@@ -1,7 +1,7 @@
 """Diagnose every finished run below a sweep directory again (after a change to the analyzer), in
 place of its ``diagnosis.parquet``; the simulations are not rerun.
 
-    python experiments/rq3_faults/rediagnose.py results/rq3 [--jobs 2] [--only wifi]
+    python experiments/rq3_faults/rediagnose.py results/rq3 [--jobs 1] [--only wifi]
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ def redo(run_dir: Path) -> str:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("root", type=Path)
-    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--jobs", type=int, default=1)
     p.add_argument("--only", default="", help="only runs whose path contains this text (e.g. wifi)")
     args = p.parse_args(argv)
     from joblib import Parallel, delayed

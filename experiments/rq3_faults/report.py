@@ -24,16 +24,13 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parents[1]))
 
-from sweep import collect  # noqa: E402
+import bench_tables as bt  # noqa: E402
+from sweep import calibration_seeds, collect  # noqa: E402
 
 from swarmbox.analysis import benchstats, detection  # noqa: E402
 from swarmbox.analysis.tables import to_markdown, write_table  # noqa: E402
 
-#: Seeds whose runs choose the detector setting of the held-out table; every other seed reports it.
-#: Faulty runs have seeds 0-2 (9 drones) or 0-1 (36 drones), healthy runs 100-103 / 100-101.
-CALIBRATION_SEEDS = (0, 100, 101)
-UNITS = {"gps_drift": "m/s", "gps_bias": "m", "gps_noise": "x sigma", "latency": "ms", "packet_loss": "ratio",
-         "burst_loss": "p_enter"}
+UNITS = bt.UNITS
 
 
 def is_default_setting(rows: pd.DataFrame) -> pd.Series:
@@ -183,81 +180,44 @@ def rq3_report(rows: pd.DataFrame, out: Path, root: Path) -> list[Path]:
     return written + ([] if from_csv else timeline_figures(root, out))
 
 
-def with_counts_ci(smallest: pd.DataFrame) -> pd.DataFrame:
-    """A :func:`detection.smallest_detected` table plus the detected/runs count at the reported
-    magnitude with its exact interval, and the false-alarm count with its exact rate interval."""
-    k = (smallest["detection_rate"] * smallest["runs_per_magnitude"]).round()
-    det = [benchstats.binomial_ci(int(x), int(n)) if np.isfinite(x) else (np.nan, np.nan)
-           for x, n in zip(k, smallest["runs_per_magnitude"], strict=True)]
-    alarms = (smallest["fa_per_drone_h"] * smallest["healthy_drone_h"]).round().astype(int)
-    fa = [benchstats.poisson_rate_ci(int(a), float(h)) for a, h in
-          zip(alarms, smallest["healthy_drone_h"], strict=True)]
-    return smallest.assign(detected=[f"{int(x)}/{int(n)}" if np.isfinite(x) else "" for x, n in
-                                     zip(k, smallest["runs_per_magnitude"], strict=True)],
-                           detection_ci_low=[d[0] for d in det], detection_ci_high=[d[1] for d in det],
-                           false_alarms=alarms, fa_ci_high=[f[1] for f in fa])
-
-
-def acceptance_table(smallest: pd.DataFrame) -> pd.DataFrame:
-    """Per fault, swarm size and network: the smallest magnitude found in >= 90 % of the runs, its
-    count and 95 % interval, and the false alarms over the healthy drone-hours with the rate's 95 %
-    upper bound."""
-    view = with_counts_ci(smallest)
-    view["smallest_magnitude"] = [f"{m:g} {UNITS.get(f, '')}" if np.isfinite(m) else "none of the swept"
-                                  for m, f in zip(view["smallest_magnitude"], view["fault"], strict=True)]
-    cols = ["fault", "detector", "n_drones", "network", "smallest_magnitude", "detected", "detection_ci_low",
-            "detection_ci_high", "t_f_median_s", "rule", "threshold_scale", "false_alarms", "healthy_drone_h",
-            "fa_ci_high"]
-    return view[cols].sort_values(["fault", "detector", "n_drones", "network"]).reset_index(drop=True)
-
-
-def held_out_table(rows: pd.DataFrame) -> pd.DataFrame:
-    """The detector setting chosen per cell on :data:`CALIBRATION_SEEDS`, reported on the others."""
-    out = detection.held_out_smallest(rows, CALIBRATION_SEEDS)
-    out = out[out["detector"] == "swarmbox"].copy()
-    for col in ("calibration_magnitude", "smallest_magnitude"):
-        out[col] = [f"{m:g} {UNITS.get(f, '')}" if np.isfinite(m) else "none of the swept"
-                    for m, f in zip(out[col], out["fault"], strict=True)]
-    return out.sort_values(["fault", "n_drones", "network"]).reset_index(drop=True)
-
-
 def bench_report(rows: pd.DataFrame, out: Path, root: Path) -> list[Path]:
+    """Every table and figure of ``bench/`` (bench_tables.py): measured on the report seeds; the
+    tuned settings chosen on the calibration seeds (``sweep.calibration_seeds``)."""
     from swarmbox.analysis import diagnosis_plots, figures
 
-    fa = detection.false_alarm_rates(rows)
-    fa_healthy = detection.false_alarm_rates(rows, healthy_runs_only=True)
-    det = detection.detection_rates(rows)
     # rows read back from a committed bench_runs.csv are its input: not rewritten
     written = [] if root.suffix == ".csv" else write_table(rows, out, "bench_runs", markdown=False)
-    written += write_table(benchstats.with_false_alarm_ci(fa), out, "false_alarms")
-    written += write_table(benchstats.with_false_alarm_ci(fa_healthy), out, "false_alarms_healthy_runs")
-    written += write_table(benchstats.with_detection_ci(det), out, "detection_rates")
-    held = held_out_table(rows)
-    written += write_table(held, out, "smallest_detected_heldout")
-    is_default = is_default_setting(rows)
-    fixed = detection.smallest_detected(detection.detection_rates(rows[is_default]),
-                                        detection.false_alarm_rates(rows[is_default]), max_fa=np.inf)
-    written += write_table(acceptance_table(fixed), out, "smallest_detected_default")
-    default = det[is_default_setting(det)]
-    written += figures.save(diagnosis_plots.detection_curves(default, units=UNITS), out, "detection_rate",
+    tables = bench_tables_of(rows)
+    for name, table in tables.items():
+        written += write_table(table, out, name)
+    single = bt.reported(rows)
+    single = single[single["part"].isin(bt.SINGLE)]
+    det = benchstats.with_detection_ci(detection.detection_rates(single))
+    written += write_table(det, out, "detection_rates")
+    default = det[bt.is_default(det) & (det["rule"] != "paper")]
+    written += figures.save(diagnosis_plots.detection_curves(default, units=bt.UNITS), out, "detection_rate",
                             formats=("png",))
-    written += figures.save(diagnosis_plots.roc_curves(detection.roc(rows)), out, "roc", formats=("png",))
-    print(to_markdown(held))
+    written += figures.save(diagnosis_plots.roc_curves(detection.roc(single)), out, "roc", formats=("png",))
+    print(to_markdown(tables["detection_default"]))
     return written
 
 
+def bench_tables_of(rows: pd.DataFrame) -> dict[str, pd.DataFrame]:
+    """The benchmark's tables by name (each is written as ``<name>.csv`` and ``<name>.md``)."""
+    return {"runs": bt.runs_table(rows), "detection_default": bt.detection_table(rows),
+            "detection_baseline": bt.detection_table(rows, "baseline"),
+            "false_alarms": bt.false_alarm_table(rows), "false_alarms_default": bt.false_alarm_summary(rows),
+            "smallest_detected_heldout": bt.held_out_table(rows, calibration_seeds()),
+            "composed": bt.composed_table(rows), "swarm_wide": bt.swarm_table(rows)}
+
+
 def read_rows(source: Path) -> pd.DataFrame:
-    """Diagnosis rows: every ``diagnosis.parquet`` below a sweep directory, or a committed
-    ``bench_runs.csv`` / ``rq3_runs.csv``. Rows written before persistence was a duration
+    """Diagnosis rows: every ``diagnosis.parquet`` below a sweep directory (:func:`sweep.collect`), or
+    a committed ``bench_runs.csv`` / ``rq3_runs.csv``. Rows written before persistence was a duration
     (``persist_ticks`` of the 25 ms grid) get the ``persist_s`` the analyzer now uses."""
-    if source.suffix == ".csv":
-        rows = pd.read_csv(source)
-    else:
-        rows = collect(source)
-        if rows.empty:
-            return rows
-        rows = rows.assign(run=[str(Path(r).relative_to(source.resolve()) if Path(r).is_absolute() else
-                                    Path(r).relative_to(source)) for r in rows["run"]])
+    rows = pd.read_csv(source) if source.suffix == ".csv" else collect(source)
+    if rows.empty:
+        return rows
     if "persist_s" in detection.SETTING and "persist_ticks" in rows and "persist_s" not in rows:
         ticks = rows.pop("persist_ticks")
         rows["persist_s"] = np.where(ticks > 1, ticks * 0.025, 0.0)

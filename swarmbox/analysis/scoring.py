@@ -11,7 +11,8 @@ alarms. Definitions (paper section 5.3, with the deliberate differences in brack
   the fence in IQRs of the swarm at that tick. [The paper's sentence reads as "the IQR"; its code,
   and this one, divide the excess by the IQR.]
 - **detected**: the target raised an alarm while the fault was on (onset to end);
-  **localized**: the *first* alarm while the fault was on named the target (which drone);
+  **localized**: the *first* alarm while the fault was on named the target (which drone); alarms
+  on the target of another fault of the same run (composed faults) are that fault's and skipped;
   **metric**: the metric of that first alarm (which metric).
 - **false alarms**: alarm incidents (a drone's overlapping episodes on any metric merged into one)
   that start in healthy time: outside every fault window and the ``grace_s`` after it, where the
@@ -163,13 +164,19 @@ def score_truths(alarms: pd.DataFrame, truths: list[Truth], span: tuple[float, f
     if not truths:
         return [common]
     rest = {"false_alarms": 0, "healthy_drone_h": 0.0}
-    return [(common if i == 0 else rest) | _grade(alarms, t, span) for i, t in enumerate(truths)]
+    targets = {t.target for t in truths if t.target is not None}
+    return [(common if i == 0 else rest) | _grade(alarms, t, span, targets - {t.target})
+            for i, t in enumerate(truths)]
 
 
-def _grade(alarms: pd.DataFrame, truth: Truth, span: tuple[float, float]) -> dict:
+def _grade(alarms: pd.DataFrame, truth: Truth, span: tuple[float, float], others: set[int]) -> dict:
+    """``others``: the drones another injected fault of the run targets. An alarm on one of them is
+    that fault's answer, so it neither localizes nor mislocalizes this one (composed faults)."""
     end = truth.end_u if truth.end_u is not None else span[1]
     during = alarms[(alarms[T] >= truth.onset_u) & (alarms[T] <= end)]
     mine = during if truth.target is None else during[during["drone"] == truth.target]
+    if truth.target is not None and others:
+        during = during[~during["drone"].isin(others)]
     first_drone = int(during.iloc[0]["drone"]) if len(during) else None
     localized = first_drone is not None and (truth.target is None or first_drone == truth.target)
     row = {"detected": bool(len(mine)), "localized": localized, "first_drone": first_drone,

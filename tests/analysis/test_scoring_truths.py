@@ -43,3 +43,18 @@ def test_a_fault_on_some_drones_stays_one_truth_per_target():
     assert [t.target for t in scoring.scored_truths(ground, drones=[0, 1])] == [None]
     [row] = scoring.score_truths(alarms((12.0, 1, "disc_h_m")), raw[:1], SPAN, n_drones=3)
     assert not row["detected"] and not row["localized"]                    # drone 1 is not drone 0
+
+
+def test_simultaneous_faults_on_two_drones_each_localize_their_own():
+    """Two faults over one window: the other target's earlier alarm is that fault's answer, not a
+    wrong drone for this one; an alarm on a healthy drone first still mislocalizes."""
+    truths = [scoring.Truth("gps_drift", 2, 10.0, 30.0), scoring.Truth("latency", 6, 10.0, 30.0)]
+    found = alarms((10.2, 6, "latency_ms"), (12.0, 2, "disc_n_m"))
+    drift, latency = scoring.score_truths(found, truths, SPAN, n_drones=9)
+    assert drift["detected"] and drift["localized"] and drift["first_drone"] == 2
+    assert drift["t_f_s"] == pytest.approx(2.0)
+    assert latency["detected"] and latency["localized"] and latency["t_f_s"] == pytest.approx(0.2)
+    drift, latency = scoring.score_truths(alarms((10.1, 4, "disc_n_m"), *[(12.0, 2, "disc_n_m")]), truths,
+                                          SPAN, n_drones=9)
+    assert drift["detected"] and not drift["localized"] and drift["first_drone"] == 4
+    assert not latency["detected"] and not latency["localized"]

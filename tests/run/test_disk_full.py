@@ -99,8 +99,8 @@ def test_a_node_process_that_cannot_write_its_logs_says_so_in_run_json(tmp_path)
     limit = 20 << 10   # each drone's state table (~23 kB here) and the ground's messages (~31 kB)
     run_dir = tmp_path / "run"
     env = {k: v for k, v in os.environ.items() if k != "SWARMBOX_NET_KEY"}
-    proc = subprocess.run([sys.executable, "-m", "swarmbox.run", *HOVER, "run.runtime=processes", "backend=mavsim",
-                           f"run.out_dir={run_dir}"], capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-m", "swarmbox.run", *HOVER, "run.runtime=processes",
+                           "backend=mavsim", f"run.out_dir={run_dir}"], capture_output=True, text=True,
                           env=dict(env, PYTHONPATH=str(ROOT)), timeout=300,
                           preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit)))
     assert proc.returncode == 1, proc.stdout + proc.stderr

@@ -119,6 +119,8 @@ class SweepMonitor:
                                 TimeElapsedColumn(), console=Console(file=self.stream), transient=False)
             progress.start()
             self._bar = (progress, progress.add_task("sweep", total=None))
+        else:   # the state at the start is not news: the first line comes with the first change
+            self._last_line, self._last_time = self.line(self.poll()), time.perf_counter()
         self._thread.start()
 
     def stop(self) -> None:

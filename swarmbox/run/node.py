@@ -258,12 +258,7 @@ class NodeProcess:
                 self.backend.close()
         finally:
             self.medium.close()
-            try:
-                self.recorder.close()
-            except OSError as exc:   # a full disk or a file size limit: named in the outcome
-                record.add_reason(result, str(exc), fail=True)
-            if self.recorder.not_written:
-                result["tables_not_written"] = self.recorder.not_written
+            record.close_logs(result, self.recorder)
             problems = record.texts_overflowed(self.texts_before)
             if problems:
                 result["problems"] = problems

@@ -268,6 +268,17 @@ def texts_overflowed(before: int) -> list[str]:
             f"holds {TEXTS.limit} texts"]
 
 
+def close_logs(manifest: dict[str, Any], recorder: Any) -> None:
+    """Finish the recorder's tables; tables that cannot be written (a full disk, a file size limit)
+    fail the run with the cause and are listed under ``tables_not_written``."""
+    try:
+        recorder.close()
+    except OSError as exc:
+        add_reason(manifest, str(exc), fail=True)
+    if recorder.not_written:
+        manifest["tables_not_written"] = recorder.not_written
+
+
 def add_reason(manifest: dict[str, Any], text: str, *, fail: bool = False) -> None:
     """Append ``text`` to the reason; ``fail``: the run is ``failed`` whatever it was."""
     manifest["reason"] = "; ".join(filter(None, [manifest.get("reason", ""), text]))

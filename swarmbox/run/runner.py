@@ -200,13 +200,8 @@ def _close(manifest: dict[str, Any], swarm: Swarm | None, recorder: Recorder, ru
     except Exception as exc:  # noqa: BLE001 - recorded; the logs must still be closed
         record.add_reason(manifest, f"backend close: {exc}")
     finally:
-        try:
-            with gc_paused():
-                recorder.close()
-        except OSError as exc:
-            record.add_reason(manifest, str(exc), fail=True)
-        if recorder.not_written:
-            manifest["tables_not_written"] = recorder.not_written
+        with gc_paused():
+            record.close_logs(manifest, recorder)
         manifest["log_writer"] = recorder.writer   # where the rows were encoded, in the end
         run_json.write(manifest)
 

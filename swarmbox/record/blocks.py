@@ -44,7 +44,8 @@ class StateBlocks:
     def reserve(self, n: int) -> tuple[int, int]:
         """Room for ``n`` more rows: returns their span ``(start, stop)``; the caller fills
         :attr:`nodes` and every buffer of :attr:`columns` there (the buffers may be new ones after
-        this call)."""
+        this call), then calls :meth:`commit`. Until then the rows are not taken: a Ctrl-C between
+        the two leaves no half-filled row (None texts, stale numbers) for the last hand-over."""
         start, stop = self.rows, self.rows + n
         if stop > self._cap:
             old_nodes, old_cols = self.nodes, self.columns
@@ -52,8 +53,11 @@ class StateBlocks:
             self.nodes[:start] = old_nodes[:start]
             for new, old in zip(self.columns, old_cols, strict=True):
                 new[:start] = old[:start]
-        self.rows = stop
         return start, stop
+
+    def commit(self, stop: int) -> None:
+        """The rows reserved up to ``stop`` are filled."""
+        self.rows = stop
 
     def add(self, nodes: np.ndarray, columns: list[Any]) -> None:
         """A block of rows: ``nodes`` and one sequence per schema column."""
@@ -63,6 +67,7 @@ class StateBlocks:
         self.nodes[start:stop] = nodes
         for buf, col in zip(self.columns, columns, strict=True):
             buf[start:stop] = col
+        self.commit(stop)
 
     def take(self, logs: dict[int, Any]) -> tuple[list[int], list[int], pa.RecordBatch]:
         """Every buffered row plus every node's buffered state tuples, emptied: (nodes in order,

@@ -83,5 +83,6 @@ class FleetStateLog:
         cols[3][a:b] = list(map(_ARMED, tels))
         cols[5][a:b] = list(map(MODE_TEXT.__getitem__, map(_MODE, tels)))
         self.backend.state_into(blocks.values[:, a:b], cols[4][a:b], self._index)
+        blocks.commit(b)
         if self._blocks is None:
             self.sink.state_block(blocks.nodes[a:b], [c[a:b] for c in cols])

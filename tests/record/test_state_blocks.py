@@ -22,6 +22,7 @@ def _fill(blocks: StateBlocks, tick: int, nodes: list[int]) -> None:
     cols[4][a:b] = False
     cols[5][a:b] = ["OFFBOARD"] * len(nodes)
     blocks.values[:, a:b] = np.arange(N_VALUES)[:, None] + 100.0 * tick + np.array(nodes)[None, :]
+    blocks.commit(b)
 
 
 def test_rows_survive_growth_and_come_out_by_node_then_tick():
@@ -42,6 +43,18 @@ def test_rows_survive_growth_and_come_out_by_node_then_tick():
     # taken rows are copies: refilling the buffers does not change them
     _fill(blocks, 99, [0, 1, 2])
     assert data.column("tick").to_pylist()[0] == 0 and blocks.rows == 3
+
+
+def test_rows_reserved_but_never_filled_are_not_taken():
+    """A Ctrl-C between reserving a tick's rows and filling them: the hand-over at the end holds the
+    filled rows only (it once took the half-filled ones and failed on their None texts)."""
+    blocks = StateBlocks(capacity=4)
+    _fill(blocks, 0, [0, 1])
+    blocks.reserve(2)                      # interrupted before the rows were written
+    assert blocks.rows == 2
+    ids, counts, data = blocks.take({})
+    assert ids == [0, 1] and counts == [1, 1] and data.column("mode").to_pylist() == ["OFFBOARD"] * 2
+    assert blocks.reserve(3) == (0, 3)     # the span is reused
 
 
 def test_block_rows_and_per_node_tuples_merge():

@@ -144,6 +144,9 @@ def _algorithm(node: DictConfig | None, base: type, role: str) -> Any:
 
 
 def build_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> Swarm:
+    if cfg.run.get("core", "object") == "fleet":   # the same run over arrays (swarmbox/core/fleet)
+        from swarmbox.run.build_fleet import build_fleet_swarm
+        return build_fleet_swarm(cfg, mission, recorder)
     params = typed_params(cfg.algo)   # first: a bad param stops the run before anything exists
     seed = int(cfg.seed)
     timing = timing_of(cfg)

@@ -1,0 +1,134 @@
+"""The drones of the fleet core: the object core's :class:`~swarmbox.core.agent.AgentNode`, its stage
+machine and hooks unchanged, with the per-tick state in arrays of the whole fleet.
+
+A drone's stage, stage tick, completion, liveness counters and message counter live in
+:class:`FleetState` arrays; the node reads and writes them through properties, so every method of
+the object core (entering a stage, a handover, the hooks' context) works as it does there. Each
+tick the fleet does over the arrays what needs no hook — the superior watchdog, a landed or waiting
+drone's completion, the finished test, every Report — and runs :meth:`FleetAgent.fleet_tick`
+(the object core's tick minus what the arrays did) only for the drones whose hooks run, or that have
+a message other than a Heartbeat confirming their stage, or whose watchdog fires.
+"""
+
+from __future__ import annotations
+
+from operator import attrgetter, methodcaller
+from typing import Any
+
+import numpy as np
+
+from swarmbox.api import Telemetry
+from swarmbox.core.agent import AgentNode
+from swarmbox.core.messages import _REPORT_FIXED, make_msg_id
+from swarmbox.core.stages import TERMINAL, Stage
+
+_TELEMETRY = methodcaller("telemetry")
+_ARMED, _LANDED, _LINK = attrgetter("armed"), attrgetter("landed"), attrgetter("link_ok")
+_DATA = attrgetter("report_data")
+ICEBREAK, PREPARATION, EXECUTION, LANDING, TERMINATION, ABORT = (int(s) for s in (
+    Stage.ICEBREAK, Stage.PREPARATION, Stage.EXECUTION, Stage.LANDING, Stage.TERMINATION, Stage.ABORT))
+
+
+class FleetState:
+    """Per-drone protocol state of the whole fleet (index ``k``: the k-th drone of the mission)."""
+
+    def __init__(self, drone_ids: list[int]) -> None:
+        n = self.n = len(drone_ids)
+        self.ids = np.array(drone_ids, dtype=np.int16)
+        self.stage = np.full(n, ICEBREAK, dtype=np.int64)
+        self.entry_tick = np.zeros(n, dtype=np.int64)     # the tick the current stage was entered
+        self.complete = np.zeros(n, dtype=bool)
+        self.finished = np.zeros(n, dtype=bool)
+        self.seq = np.zeros(n, dtype=np.int64)            # messages sent (the id counter)
+        self.msg_id_base = np.array([make_msg_id(d, 0) for d in drone_ids], dtype=np.int64)
+        self.sup_silent = np.zeros(n, dtype=np.int64)
+        self.heard = np.zeros(n, dtype=bool)
+        self.busy = np.zeros(n, dtype=bool)      # messages for the node's own inbox this tick
+        self.sticky = np.zeros(n, dtype=bool)    # ever had a task or an alert: always ticks in Python
+        self.tels: list[Telemetry] = [None] * n  # type: ignore[list-item]  # this tick's readings
+        self.armed = np.zeros(n, dtype=bool)     # ... as arrays
+        self.landed = np.ones(n, dtype=bool)
+        self.link_ok = np.ones(n, dtype=bool)
+
+    def read(self, vehicles: list[Any]) -> None:
+        """Every drone's telemetry at the start of its tick (a drone's commands change only its own
+        vehicle, so reading all first reads what each would have read)."""
+        tels = self.tels = list(map(_TELEMETRY, vehicles))
+        n = self.n
+        self.armed = np.fromiter(map(_ARMED, tels), bool, n)
+        self.landed = np.fromiter(map(_LANDED, tels), bool, n)
+        self.link_ok = np.fromiter(map(_LINK, tels), bool, n)
+
+
+def _array_property(name: str, cast: type) -> property:
+    def get(self: FleetAgent) -> Any:
+        return cast(getattr(self._fleet, name)[self._k])
+
+    def put(self: FleetAgent, value: Any) -> None:
+        getattr(self._fleet, name)[self._k] = value
+
+    return property(get, put)
+
+
+class FleetAgent(AgentNode):
+    """An AgentNode whose per-tick state lives in the fleet's arrays (see the module's notes)."""
+
+    def __init__(self, node_id: int, *, fleet: FleetState, k: int, **kw: Any) -> None:
+        self._fleet, self._k = fleet, k
+        super().__init__(node_id, **kw)
+        fleet.entry_tick[k] = 0   # the first tick counts 0, as the object core's first increment makes it
+
+    stage_code = _array_property("stage", int)
+    complete = _array_property("complete", bool)
+    finished = _array_property("finished", bool)
+    _seq = _array_property("seq", int)
+    _sup_silent = _array_property("sup_silent", int)
+    _heard_superior = _array_property("heard", bool)
+
+    @property
+    def stage_tick(self) -> int:
+        return self.time.tick - int(self._fleet.entry_tick[self._k])
+
+    @stage_tick.setter
+    def stage_tick(self, value: int) -> None:
+        self._fleet.entry_tick[self._k] = self.time.tick - value
+
+    @property
+    def telemetry(self) -> Telemetry:
+        return self._fleet.tels[self._k]
+
+    @telemetry.setter
+    def telemetry(self, value: Telemetry) -> None:
+        self._fleet.tels[self._k] = value
+
+    def fleet_tick(self) -> None:
+        """AgentNode.tick without what the fleet does over its arrays: the stage tick (derived),
+        the telemetry reading (done for all), the Report (sent with all) and the state row."""
+        tel = self.telemetry
+        self._own = None
+        if not tel.link_ok and self.stage not in TERMINAL:
+            self.event("failsafe", "vehicle_link_lost", self.node_id, action="return_to_launch")
+            self.enter(Stage.ABORT, "link to the autopilot lost", failsafe=True)
+        if self.inbox or self._window_busy or self.proximity:
+            self._drain_inbox()
+        if self._heard_superior and self.stage not in TERMINAL:   # the superior watchdog
+            self._sup_silent += 1
+            if self._sup_silent > self._lost_superior_ticks:
+                self._hand_over("silent")
+        now = self.clock.now()
+        self.complete = self._stage_work(tel, now)
+        if self.stage in TERMINAL and (not tel.armed or self.stage_timed_out()):
+            self.finished = True
+
+
+def report_columns(fleet: FleetState, agents: list[FleetAgent], now: np.ndarray,
+                   values: np.ndarray) -> dict[str, Any]:
+    """Every drone's Report of this tick (to the ground) as columns; ``values``: the state columns at
+    the start of the tick (estimated position and velocity first)."""
+    fleet.seq += 1
+    data = np.fromiter(map(_DATA, agents), object, fleet.n)
+    return {"src": fleet.ids, "srci": np.arange(1, fleet.n + 1, dtype=np.int32), "dst": -1, "dsti": 0,
+            "msg_id": fleet.msg_id_base | fleet.seq, "t_sent": now, "stage": fleet.stage,
+            "complete": fleet.complete, "alive": (fleet.stage != ABORT).astype(np.int32),
+            "pos": values[0:3].T, "vel": values[3:6].T, "data": data,
+            "nbytes": _REPORT_FIXED + np.fromiter(map(len, data), np.int32, fleet.n)}

@@ -1,0 +1,225 @@
+"""The fleet's simulated network: every message of a tick routed as one batch of arrays.
+
+The same network as :class:`swarmbox.net.medium.SimMedium` (constant latency, uniform jitter,
+Bernoulli loss, all from the run's ``network`` generator), computed over arrays: the periodic
+traffic (a Heartbeat published to every subscriber, every drone's Report) travels as array rows,
+other messages (tasks, acknowledgements, proximity alerts) as the message objects, side by side.
+
+Why the results are the object core's, number for number:
+
+- *Draws.* SimMedium draws, per message and destination, one uniform for the jitter (if any) and
+  one for the loss (if any), at send time, in send order. Every message takes the same number of
+  draws whatever happens to it, so a tick's draws are one ``rng.random(k * M)`` call over its M
+  messages put in send order: the ground's first (its Heartbeat to each subscriber in subscription
+  order, then whatever its hooks send), then each drone's in fleet order (what its hooks sent, then
+  its Report). ``Generator.random(n)`` yields the stream of ``n`` scalar calls.
+- *Delivery order.* SimMedium hands over a message at the first tick at or after its arrival, in
+  send order on a constant-delay network (a FIFO) and by ``(arrival, send tick, send order)`` with
+  jitter (a heap). The pending rows are kept sorted that way, so a tick's deliveries are a prefix.
+- *Rows.* A send row when sent (a Heartbeat: one row for all subscribers), a drop row in the
+  network's log when lost, a receive row stamped with the receiver's clock at the arrival instant;
+  per node in the order they happen, which is all the per-node log files keep.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from swarmbox.core.clock import NodeClock, TimeSource
+from swarmbox.core.fleet.rows import MessageRows
+from swarmbox.core.messages import BROADCAST, MESSAGE_TYPE_CODES, NET_ID, Heartbeat, Report, broadcast_dsts
+from swarmbox.core.rows import DROP, NO_TEXT, RECV, SEND, TEXTS
+
+HEARTBEAT, REPORT = MESSAGE_TYPE_CODES[Heartbeat], MESSAGE_TYPE_CODES[Report]
+_LOSS = TEXTS.code("loss")
+#: a message's columns while it is in flight (``obj``: its object's key, -1 for a batch Report)
+COLUMNS = {"arrival": np.float64, "tick": np.int64, "order": np.int64, "src": np.int16, "srci": np.int32,
+           "dst": np.int16, "dsti": np.int32, "msg_id": np.int64, "mtype": np.int32, "nbytes": np.int32,
+           "t_sent": np.float64, "obj": np.int64, "stage": np.int16, "complete": np.bool_,
+           "alive": np.int32, "pos": np.float64, "vel": np.float64, "data": object}
+_VECTORS = ("pos", "vel")   # (n, 3) columns
+
+
+def empty(n: int, **values: Any) -> dict[str, np.ndarray]:
+    """Columns for ``n`` messages, zero but for ``values`` (arrays, sequences or scalars)."""
+    seg = {k: np.zeros((n, 3) if k in _VECTORS else n, dtype=t) for k, t in COLUMNS.items()}
+    for name, value in values.items():
+        seg[name][...] = value
+    return seg
+
+
+class FleetNetwork:
+    """Routes every message of the fleet core; node index 0 is the ground, ``k + 1`` drone ``k``."""
+
+    def __init__(self, time: TimeSource, rng: np.random.Generator, node_ids: list[int],
+                 clocks: list[NodeClock], rows: MessageRows, *, latency_s: float = 0.0,
+                 jitter_s: float = 0.0, loss_prob: float = 0.0) -> None:
+        self._time, self._rng, self.rows = time, rng, rows
+        self.ids = np.array(node_ids, dtype=np.int16)
+        self._index = {node: k for k, node in enumerate(node_ids)}
+        # the clocks' lines, fixed for the run (a clock fault, which changes them, is not covered)
+        self._scale = np.array([c._scale for c in clocks])
+        self._offset = np.array([c._offset_s for c in clocks])
+        self.latency_s, self.jitter_s, self.loss_prob = latency_s, jitter_s, loss_prob
+        self._draws = (jitter_s > 0) + (loss_prob > 0)   # uniforms per message (none: ideal network)
+        self._subscribers: dict[int, list[int]] = {}
+        self._objects: dict[int, list] = {}   # key -> [message, destinations still to hand over]
+        self._next_obj = 0
+        self._routed = 0                      # messages routed so far (the heap's tie-break)
+        self._out: list[dict[str, np.ndarray]] = []   # this tick's messages, in segments
+        self._out_keys: list[tuple[np.ndarray, np.ndarray]] = []
+        self._singles: list[tuple] = []       # this tick's single messages, until the next segment
+        self.phase = 0                        # 0: the ground's turn; k + 1: drone k's
+        self._counter = 0                     # send order within a phase
+        self.pending = empty(0)
+
+    # -- the Transport protocol (the object nodes' calls) ---------------------------------------
+    def subscribe(self, subscriber: int, publisher: int) -> None:
+        subs = self._subscribers.setdefault(publisher, [])
+        if subscriber not in subs:
+            subs.append(subscriber)
+
+    def unsubscribe(self, subscriber: int, publisher: int) -> None:
+        subs = self._subscribers.get(publisher, [])
+        if subscriber in subs:
+            subs.remove(subscriber)
+
+    def has_subscribers(self, publisher: int) -> bool:
+        return bool(self._subscribers.get(publisher))
+
+    def send(self, msg: Any, dst: int) -> None:
+        """One message to one node: its send row now, its routing with the tick's batch."""
+        mtype, nbytes, sent, src = MESSAGE_TYPE_CODES[type(msg)], msg.nbytes, msg.t_sent_s, msg.src
+        self.rows.one(src, (sent, self._time.tick, SEND, msg.msg_id, mtype, src, dst, nbytes, sent, NO_TEXT))
+        key = self._keep(msg, 1)
+        self._singles.append((self.phase, self._counter, src, self._index[src], dst, self._index[dst],
+                              msg.msg_id, mtype, nbytes, sent, key))
+        self._counter += 1
+
+    def publish(self, msg: Any) -> None:
+        """A Heartbeat to every subscriber of its sender: one ``send`` row for all of them."""
+        dsts = self._subscribers.get(msg.src)
+        if not dsts:
+            return
+        mtype, nbytes, sent, src = MESSAGE_TYPE_CODES[type(msg)], msg.nbytes, msg.t_sent_s, msg.src
+        self.rows.one(src, (sent, self._time.tick, SEND, msg.msg_id, mtype, src, BROADCAST, nbytes, sent,
+                            TEXTS.code(broadcast_dsts(dsts))))
+        n = len(dsts)
+        seg = empty(n, src=src, srci=self._index[src], dst=dsts, dsti=[self._index[d] for d in dsts],
+                    msg_id=msg.msg_id, mtype=mtype, nbytes=nbytes, t_sent=sent, obj=self._keep(msg, n),
+                    stage=msg.stage if mtype == HEARTBEAT else -1)
+        self._settle()
+        self._out.append(seg)
+        self._out_keys.append((np.full(n, self.phase), self._counter + np.arange(n)))
+        self._counter += n
+
+    def _keep(self, msg: Any, n: int) -> int:
+        key = self._next_obj
+        self._objects[key] = [msg, n]
+        self._next_obj += 1
+        return key
+
+    def _settle(self) -> None:
+        """The single messages sent so far, as one segment (before the next segment)."""
+        singles = self._singles
+        if not singles:
+            return
+        phase, counter, src, srci, dst, dsti, msg_id, mtype, nbytes, sent, obj = zip(*singles, strict=True)
+        seg = empty(len(singles), src=src, srci=srci, dst=dst, dsti=dsti, msg_id=msg_id, mtype=mtype,
+                    nbytes=nbytes, t_sent=sent, obj=obj, stage=-1)
+        self._out.append(seg)
+        self._out_keys.append((np.array(phase, dtype=np.int64), np.array(counter, dtype=np.int64)))
+        self._singles = []
+
+    # -- batches ---------------------------------------------------------------------------------
+    def send_reports(self, seg: dict[str, np.ndarray], n: int) -> None:
+        """Every drone's Report of this tick (``seg``: their columns, drones in fleet order); each
+        goes out after whatever its drone's hooks sent."""
+        self._settle()
+        self.rows.block(seg["src"], {"t_s": seg["t_sent"], "tick": self._time.tick, "kind": SEND,
+                                "msg_id": seg["msg_id"], "type": REPORT, "src": seg["src"],
+                                "dst": seg["dst"], "nbytes": seg["nbytes"], "t_sent_s": seg["t_sent"],
+                                "reason": NO_TEXT}, n)
+        self._out.append(seg)
+        self._out_keys.append((seg["srci"].astype(np.int64), np.full(n, 1 << 40)))
+
+    def route(self) -> None:
+        """Impair this tick's messages in send order: drop rows for the lost, the rest in flight."""
+        self._settle()
+        if not self._out:
+            return
+        segs, keys = self._out, self._out_keys
+        self._out, self._out_keys, self._counter = [], [], 0
+        out = {k: np.concatenate([s[k] for s in segs]) for k in COLUMNS}
+        order = np.lexsort((np.concatenate([k[1] for k in keys]), np.concatenate([k[0] for k in keys])))
+        out = {k: v[order] for k, v in out.items()}
+        m = len(order)
+        t, tick = self._time.t_s, self._time.tick
+        delay = np.full(m, self.latency_s)
+        lost = np.zeros(m, dtype=bool)
+        if self._draws:
+            u = self._rng.random(m * self._draws).reshape(m, self._draws)
+            if self.jitter_s:
+                delay = self.latency_s + self.jitter_s * u[:, 0]
+            if self.loss_prob:
+                lost = u[:, -1] < self.loss_prob
+        out["tick"][:] = tick
+        out["order"] = self._routed + np.arange(m)
+        self._routed += m
+        out["arrival"] = t + delay
+        if lost.any():
+            self._drop(out, lost, t, tick)
+            out = {k: v[~lost] for k, v in out.items()}
+        self._enqueue(out)
+
+    def _drop(self, out: dict[str, np.ndarray], lost: np.ndarray, t: float, tick: int) -> None:
+        self.rows.block(NET_ID, {"t_s": t, "tick": tick, "kind": DROP, "msg_id": out["msg_id"][lost],
+                                 "type": out["mtype"][lost], "src": out["src"][lost], "dst": out["dst"][lost],
+                                 "nbytes": out["nbytes"][lost], "t_sent_s": out["t_sent"][lost],
+                                 "reason": _LOSS}, int(lost.sum()))
+        self._forget(out["obj"][lost])
+
+    def _forget(self, keys: np.ndarray) -> None:
+        """Objects handed over (or lost) for some of their destinations."""
+        keys, counts = np.unique(keys[keys >= 0], return_counts=True)
+        for key, count in zip(keys.tolist(), counts.tolist(), strict=True):
+            entry = self._objects[key]
+            entry[1] -= count
+            if not entry[1]:
+                del self._objects[key]
+
+    def _enqueue(self, out: dict[str, np.ndarray]) -> None:
+        p = self.pending
+        both = {k: np.concatenate((p[k], out[k])) for k in COLUMNS}
+        if self.jitter_s:   # the heap's order: arrival, then send tick, then send order
+            order = np.lexsort((both["order"], both["tick"], both["arrival"]))
+            both = {k: v[order] for k, v in both.items()}
+        self.pending = both
+
+    def deliver(self) -> dict[str, np.ndarray]:
+        """Every message that has arrived by now, in hand-over order, with its receive row logged;
+        the objects among them in ``objects`` (None for a batch Report)."""
+        p = self.pending
+        n = int(np.searchsorted(p["arrival"], self._time.t_s + 1e-12, side="right"))
+        due = {k: v[:n] for k, v in p.items()}
+        self.pending = {k: v[n:] for k, v in p.items()}
+        if not n:
+            return due
+        dsti = due["dsti"]   # the receiver's clock at the arrival instant (NodeClock.at, the same arithmetic)
+        local = due["arrival"] * self._scale[dsti] + self._offset[dsti]
+        self.rows.block(due["dst"], {"t_s": local, "tick": self._time.tick, "kind": RECV,
+                                     "msg_id": due["msg_id"], "type": due["mtype"], "src": due["src"],
+                                     "dst": due["dst"], "nbytes": due["nbytes"], "t_sent_s": due["t_sent"],
+                                     "reason": NO_TEXT}, n)
+        return due
+
+    def objects(self, keys: np.ndarray) -> list[Any]:
+        """The message objects of delivered rows (``keys`` >= 0)."""
+        objects = self._objects
+        return [objects[k][0] for k in keys.tolist()]
+
+    def release(self, keys: np.ndarray) -> None:
+        """Delivered rows: their objects are kept until every destination has had its copy."""
+        self._forget(keys)

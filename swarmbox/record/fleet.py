@@ -109,7 +109,7 @@ class FleetCoreStateLog(FleetStateLog):
         cols[1][a:b] = tick
         cols[2][a:b] = f.stage
         cols[3][a:b] = f.armed
-        cols[5][a:b] = list(map(MODE_TEXT.__getitem__, map(_MODE, f.tels)))
+        cols[5][a:b] = list(map(MODE_TEXT.__getitem__, f.modes))
         self.backend.state_into(blocks.values[:, a:b], cols[4][a:b], self._index)
         blocks.commit(b)
         if self._blocks is None:

@@ -24,6 +24,7 @@ from swarmbox.core.stages import TERMINAL, Stage
 
 _TELEMETRY = methodcaller("telemetry")
 _ARMED, _LANDED, _LINK = attrgetter("armed"), attrgetter("landed"), attrgetter("link_ok")
+_MODE = attrgetter("mode")
 _DATA = attrgetter("report_data")
 ICEBREAK, PREPARATION, EXECUTION, LANDING, TERMINATION, ABORT = (int(s) for s in (
     Stage.ICEBREAK, Stage.PREPARATION, Stage.EXECUTION, Stage.LANDING, Stage.TERMINATION, Stage.ABORT))
@@ -49,15 +50,44 @@ class FleetState:
         self.armed = np.zeros(n, dtype=bool)     # ... as arrays
         self.landed = np.ones(n, dtype=bool)
         self.link_ok = np.ones(n, dtype=bool)
+        self.modes: list[Any] = []
+        self.tick_read = 0                           # readings so far
+        self.fetched = np.zeros(n, dtype=np.int64)   # the reading each record in ``tels`` is from
 
-    def read(self, vehicles: list[Any]) -> None:
-        """Every drone's telemetry at the start of its tick (a drone's commands change only its own
-        vehicle, so reading all first reads what each would have read)."""
-        tels = self.tels = list(map(_TELEMETRY, vehicles))
-        n = self.n
-        self.armed = np.fromiter(map(_ARMED, tels), bool, n)
-        self.landed = np.fromiter(map(_LANDED, tels), bool, n)
-        self.link_ok = np.fromiter(map(_LINK, tels), bool, n)
+    def read(self, vehicles: list[Any], landed: np.ndarray, crashed: bool) -> None:
+        """Every drone's reading at the start of its tick, as arrays (a drone's commands change only
+        its own vehicle, so reading all first reads what each would have read). The telemetry
+        records are fetched only for the drones that tick in Python (:meth:`fetch`); a crashed
+        vehicle's frozen record is its own, so with a crash every record is fetched."""
+        self.tick_read += 1
+        if crashed:
+            tels = self.tels = list(map(_TELEMETRY, vehicles))
+            self.fetched[:] = self.tick_read
+            self.armed = np.fromiter(map(_ARMED, tels), bool, self.n)
+            self.landed = np.fromiter(map(_LANDED, tels), bool, self.n)
+            self.link_ok = np.fromiter(map(_LINK, tels), bool, self.n)
+            self.modes = list(map(_MODE, tels))
+            return
+        self.armed = np.fromiter(map(_ARMED, vehicles), bool, self.n)   # what the record would say
+        self.landed = landed.copy()
+        self.link_ok[:] = True
+        self.modes = list(map(_MODE, vehicles))
+
+    def fetch(self, vehicles: list[Any], drones: list[int]) -> None:
+        """The telemetry records of ``drones`` (this tick's reading)."""
+        tels, fetched, now = self.tels, self.fetched, self.tick_read
+        for k in drones:
+            if fetched[k] != now:
+                tels[k] = vehicles[k].telemetry()
+                fetched[k] = now
+
+    def settle(self, vehicles: list[Any]) -> None:
+        """Records for the drones not fetched at the last reading, with what the arrays read then
+        (armed, landed, link): what the end-of-run summary and a vehicle failure read."""
+        for k in np.flatnonzero(self.fetched != self.tick_read).tolist():
+            self.tels[k] = vehicles[k].telemetry()._replace(
+                armed=bool(self.armed[k]), landed=bool(self.landed[k]), link_ok=bool(self.link_ok[k]))
+            self.fetched[k] = self.tick_read
 
 
 def _array_property(name: str, cast: type) -> property:
@@ -119,6 +149,12 @@ class FleetAgent(AgentNode):
         self.complete = self._stage_work(tel, now)
         if self.stage in TERMINAL and (not tel.armed or self.stage_timed_out()):
             self.finished = True
+
+    def fleet_hooks(self, now: float) -> bool:
+        """The tick of a drone in a loop stage with nothing in its inbox and its watchdog quiet (the
+        fleet counted it): the stage's hooks and setpoint; returns ``complete``."""
+        self._own = None
+        return self._stage_work(self.telemetry, now)
 
 
 def report_columns(fleet: FleetState, agents: list[FleetAgent], now: np.ndarray,

@@ -73,7 +73,8 @@ class FleetSwarm(Swarm):
         self._timeouts = np.array([t.timeouts_s[s.name] for s in Stage])   # by stage code
         self._values = np.empty((14, fleet.n))
         self._landed = np.empty(fleet.n, dtype=bool)
-        fleet.read(self._vehicles)
+        self._crashed = getattr(self.backend, "crashed", None)
+        self.now = np.zeros(fleet.n)
 
     # -- the loop ----------------------------------------------------------------------------------
     def run(self, max_sim_time_s: float, speed: float = 1.0,
@@ -89,6 +90,7 @@ class FleetSwarm(Swarm):
             return super().run(max_sim_time_s, speed, hand_over)
         finally:
             self.rows.hand_over()
+            self.fleet.settle(self._vehicles)
 
     def done(self) -> bool:
         return self.ground.finished and bool(self.fleet.finished.all())
@@ -112,6 +114,7 @@ class FleetSwarm(Swarm):
                 log((agent.clock.now(), t.tick, ev.kind, ev.name, ev.drone_id,
                      json.dumps(ev.data, sort_keys=True, default=str)))
                 if ev.kind == "failure":   # the autopilot cannot fly the mission: the drone aborts
+                    self.fleet.settle(self._vehicles)
                     agent.vehicle_failed(str(ev.data.get("reason", ev.name)))
         t.tick += 1
         t.t_s = t.tick * self.tick_s
@@ -149,33 +152,46 @@ class FleetSwarm(Swarm):
     # -- the drones' ticks -------------------------------------------------------------------------
     def tick_drones(self) -> None:
         f, tick = self.fleet, self.time.tick
-        f.read(self._vehicles)
         self.backend.state_into(self._values, self._landed)   # the Reports' positions, read now
+        crashed = self._crashed is not None and bool(self._crashed.any())
+        f.read(self._vehicles, self._landed, crashed)
         stage = f.stage
         terminal = (stage == TERMINATION) | (stage == ABORT)
+        loop = (stage == PREPARATION) | (stage == EXECUTION)
         watch = f.heard & ~terminal
-        py = (f.busy | f.sticky | (stage == PREPARATION) | (stage == EXECUTION) | (~f.link_ok & ~terminal)
-              | (watch & (f.sup_silent + 1 > self._lost_superior)))
-        rest = ~py
+        full = (f.busy | f.sticky | (~f.link_ok & ~terminal) | (watch & (f.sup_silent + 1 > self._lost_superior)))
+        rest = ~full
         f.sup_silent[watch & rest] += 1
+        hooks = rest & loop
+        rest &= ~loop
         down = (stage == LANDING) | (stage == ABORT)
         f.complete[rest] = np.where(down, f.landed & ~f.armed, True)[rest]
         timed_out = (tick - f.entry_tick) * self.tick_s > self._timeouts[stage]
         f.finished[rest & terminal & (~f.armed | timed_out)] = True
-        self.run_hooks(np.flatnonzero(py))
+        self.now = readings(self._clocks, self.time.t_s)
+        self.run_hooks(np.flatnonzero(full), np.flatnonzero(hooks))
         f.busy[:] = False
         self.send_reports()
 
-    def run_hooks(self, drones: np.ndarray) -> None:
-        """The drones that tick in Python this tick, in fleet order (a batch hook would go here, for
-        the drones in their loop stages)."""
-        net, agents = self.network, self.agents
-        for k in drones.tolist():
-            net.phase = k + 1   # what this drone sends goes out before its Report, after the last drone's
-            agents[k].fleet_tick()
-
+    def run_hooks(self, full: np.ndarray, hooks: np.ndarray) -> None:
+        """The drones that tick in Python, in fleet order: ``full`` the whole tick (messages in their
+        inbox, a watchdog firing), ``hooks`` only their loop stage's hooks. A batch hook would be
+        called here for ``hooks`` (and for the drones of ``full`` in a loop stage) instead."""
+        net, agents, f = self.network, self.agents, self.fleet
+        f.fetch(self._vehicles, full.tolist())
+        f.fetch(self._vehicles, hooks.tolist())
+        if not len(full):   # the usual tick: nothing a drone sends but its Report
+            now = self.now.tolist()
+            f.complete[hooks] = [agents[k].fleet_hooks(now[k]) for k in hooks.tolist()]
+            return
+        now, whole = self.now.tolist(), set(full.tolist())
+        for k in np.union1d(full, hooks).tolist():
+            net.phase = k + 1   # what this drone sends goes out after the last drone's, before its Report
+            if k in whole:
+                agents[k].fleet_tick()
+            else:
+                f.complete[k] = agents[k].fleet_hooks(now[k])
     def send_reports(self) -> None:
         f = self.fleet
-        now = readings(self._clocks, self.time.t_s)
-        seg = empty(f.n, obj=-1, mtype=REPORT, **report_columns(f, self.agents, now, self._values))
+        seg = empty(f.n, obj=-1, mtype=REPORT, **report_columns(f, self.agents, self.now, self._values))
         self.network.send_reports(seg, f.n)

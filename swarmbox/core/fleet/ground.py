@@ -100,7 +100,7 @@ class FleetGround(GroundNode):
         self.rep_data = np.full(n, "", dtype=object)
         self._views: dict[str, Any] = {}
         self._near = NearPairs()
-        self.due: dict[str, np.ndarray] | None = None   # this tick's deliveries (set by the fleet)
+        self.due: np.ndarray | None = None   # this tick's Reports (network.ITEM records, set by the fleet)
         self.acks: list[TaskAck] = []
         super().__init__(algorithm, **kw)
         self.inferiors = _Inferiors(self)   # type: ignore[assignment]
@@ -111,7 +111,7 @@ class FleetGround(GroundNode):
         for ack in self.acks:
             self.on_ack(ack)
         self.acks = []
-        if due is None or not len(due["srci"]):
+        if due is None or not len(due):
             return
         self._views.clear()
         k = due["srci"] - 1   # drone index of each Report, in hand-over order

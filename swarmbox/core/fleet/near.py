@@ -10,11 +10,18 @@ than the tracker's own rounding.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from swarmbox.core.proximity import kd_tree
 
 _DIRECT_UP_TO = 48
+
+
+@functools.cache
+def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    return np.triu_indices(n, 1)
 
 
 def _margin(limit_m: float) -> float:
@@ -37,9 +44,9 @@ class NearPairs:
             return False
         limit = _margin(limit_m)
         if n <= _DIRECT_UP_TO:
-            gap = pts[:, None, :] - pts[None, :, :]
-            d2 = np.einsum("ijk,ijk->ij", gap, gap)
-            return bool((d2[np.triu_indices(n, 1)] <= limit * limit).any())
+            a, b = _pairs(n)
+            gap = pts[a] - pts[b]
+            return bool((np.einsum("ij,ij->i", gap, gap) <= limit * limit).any())
         if not np.array_equal(ids, self._ids) or not self._valid(pts, limit):
             self._rebuild(pts, ids, limit)
         a, b = self._cand

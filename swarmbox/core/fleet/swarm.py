@@ -130,7 +130,7 @@ class FleetSwarm(Swarm):
         to_ground = due["dsti"] == 0
         if to_ground.any():
             reports = to_ground & (due["obj"] < 0)
-            self.ground.due = {k: v[reports] for k, v in due.items()}
+            self.ground.due = due[reports]
             self.ground.acks = [m for m in net.objects(due["obj"][to_ground & ~reports]) if type(m) is TaskAck]
         k = due["dsti"] - 1
         to_drone = ~to_ground

@@ -25,7 +25,7 @@ from swarmbox.core.stages import TERMINAL, Stage
 _TELEMETRY = methodcaller("telemetry")
 _ARMED, _LANDED, _LINK = attrgetter("armed"), attrgetter("landed"), attrgetter("link_ok")
 _MODE = attrgetter("mode")
-_DATA = attrgetter("report_data")
+DATA = attrgetter("report_data")
 ICEBREAK, PREPARATION, EXECUTION, LANDING, TERMINATION, ABORT = (int(s) for s in (
     Stage.ICEBREAK, Stage.PREPARATION, Stage.EXECUTION, Stage.LANDING, Stage.TERMINATION, Stage.ABORT))
 
@@ -157,14 +157,12 @@ class FleetAgent(AgentNode):
         return self._stage_work(self.telemetry, now)
 
 
-def report_columns(fleet: FleetState, agents: list[FleetAgent], now: np.ndarray,
-                   values: np.ndarray) -> dict[str, Any]:
-    """Every drone's Report of this tick (to the ground) as columns; ``values``: the state columns at
-    the start of the tick (estimated position and velocity first)."""
+def report_columns(fleet: FleetState, data: list[str], now: np.ndarray, values: np.ndarray) -> dict[str, Any]:
+    """Every drone's Report of this tick (to the ground) as columns; ``data``: their texts;
+    ``values``: the state columns at the start of the tick (estimated position and velocity first)."""
     fleet.seq += 1
-    data = np.fromiter(map(_DATA, agents), object, fleet.n)
     return {"src": fleet.ids, "srci": np.arange(1, fleet.n + 1, dtype=np.int32), "dst": -1, "dsti": 0,
             "msg_id": fleet.msg_id_base | fleet.seq, "t_sent": now, "stage": fleet.stage,
             "complete": fleet.complete, "alive": (fleet.stage != ABORT).astype(np.int32),
-            "pos": values[0:3].T, "vel": values[3:6].T, "data": data,
+            "pos": values[0:3].T, "vel": values[3:6].T,
             "nbytes": _REPORT_FIXED + np.fromiter(map(len, data), np.int32, fleet.n)}

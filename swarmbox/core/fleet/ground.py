@@ -123,7 +123,10 @@ class FleetGround(GroundNode):
         np.add.at(self.received, k, 1)
         self.silent[src] = 0
         self.rep_stage[src], self.rep_complete[src] = due["stage"][last], due["complete"][last]
-        self.rep_alive[src], self.rep_data[src] = due["alive"][last], due["data"][last]
+        self.rep_alive[src] = due["alive"][last]
+        if (due["data"] >= 0).any() or (self.rep_data[src] != "").any():
+            texts = [self.net.text(key) for key in due["data"].tolist()]   # released, latest kept
+            self.rep_data[src] = [texts[i] for i in last.tolist()]
         self.rep_pos[src], self.rep_vel[src] = due["pos"][last], due["vel"][last]
         self.rep_t[src] = self.clock.now()
 

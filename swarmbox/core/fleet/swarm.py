@@ -22,6 +22,7 @@ import numpy as np
 from swarmbox.core.clock import readings
 from swarmbox.core.fleet.agents import (
     ABORT,
+    DATA,
     EXECUTION,
     LANDING,
     PREPARATION,
@@ -193,5 +194,6 @@ class FleetSwarm(Swarm):
                 f.complete[k] = agents[k].fleet_hooks(now[k])
     def send_reports(self) -> None:
         f = self.fleet
-        seg = empty(f.n, obj=-1, mtype=REPORT, **report_columns(f, self.agents, self.now, self._values))
-        self.network.send_reports(seg, f.n)
+        data = list(map(DATA, self.agents))
+        seg = empty(f.n, obj=-1, mtype=REPORT, **report_columns(f, data, self.now, self._values))
+        self.network.send_reports(seg, f.n, data)

@@ -120,7 +120,7 @@ class FleetGround(GroundNode):
             self._arrivals(k, new)
         last = len(k) - 1 - np.unique(k[::-1], return_index=True)[1]   # each drone's latest Report
         src = k[last]
-        np.add.at(self.received, k, 1)
+        self.received += np.bincount(k, minlength=len(self.received))
         self.silent[src] = 0
         self.rep_stage[src], self.rep_complete[src] = due["stage"][last], due["complete"][last]
         self.rep_alive[src] = due["alive"][last]

@@ -79,6 +79,7 @@ class FleetNetwork:
         self.latency_s, self.jitter_s, self.loss_prob = latency_s, jitter_s, loss_prob
         self._draws = (jitter_s > 0) + (loss_prob > 0)   # uniforms per message (none: ideal network)
         self._subscribers: dict[int, list[int]] = {}
+        self._fans: dict[int, tuple[np.ndarray, int]] = {}   # publisher -> see _fan
         self._objects: dict[int, list] = {}   # key -> [message, destinations still to hand over]
         self._next_obj = 0
         self._routed = 0                      # messages routed so far (the heap's tie-break)
@@ -94,11 +95,13 @@ class FleetNetwork:
         subs = self._subscribers.setdefault(publisher, [])
         if subscriber not in subs:
             subs.append(subscriber)
+            self._fans.pop(publisher, None)
 
     def unsubscribe(self, subscriber: int, publisher: int) -> None:
         subs = self._subscribers.get(publisher, [])
         if subscriber in subs:
             subs.remove(subscriber)
+            self._fans.pop(publisher, None)
 
     def has_subscribers(self, publisher: int) -> bool:
         return bool(self._subscribers.get(publisher))
@@ -114,20 +117,32 @@ class FleetNetwork:
 
     def publish(self, msg: Any) -> None:
         """A Heartbeat to every subscriber of its sender: one ``send`` row for all of them."""
-        dsts = self._subscribers.get(msg.src)
-        if not dsts:
+        src = msg.src
+        fan = self._fans.get(src)
+        if fan is None:
+            fan = self._fan(src)
+        template, text = fan
+        n = len(template)
+        if not n:
             return
-        mtype, nbytes, sent, src = MESSAGE_TYPE_CODES[type(msg)], msg.nbytes, msg.t_sent_s, msg.src
-        self.rows.one(src, (sent, self._time.tick, SEND, msg.msg_id, mtype, src, BROADCAST, nbytes, sent,
-                            TEXTS.code(broadcast_dsts(dsts))))
-        n = len(dsts)
-        seg = empty(n, src=src, srci=self._index[src], dst=dsts, dsti=[self._index[d] for d in dsts],
-                    msg_id=msg.msg_id, mtype=mtype, nbytes=nbytes, t_sent=sent, obj=self._keep(msg, n),
-                    stage=msg.stage if mtype == HEARTBEAT else -1)
+        mtype, nbytes, sent = MESSAGE_TYPE_CODES[type(msg)], msg.nbytes, msg.t_sent_s
+        self.rows.one(src, (sent, self._time.tick, SEND, msg.msg_id, mtype, src, BROADCAST, nbytes, sent, text))
+        seg = template.copy()
+        seg["msg_id"], seg["mtype"], seg["nbytes"], seg["t_sent"] = msg.msg_id, mtype, nbytes, sent
+        seg["obj"], seg["stage"] = self._keep(msg, n), msg.stage if mtype == HEARTBEAT else -1
         self._settle()
         self._out.append(seg)
         self._out_keys.append((np.full(n, self.phase), self._counter + np.arange(n)))
         self._counter += n
+
+    def _fan(self, src: int) -> tuple[np.ndarray, int]:
+        """A publisher's subscribers as records to copy, and the text code of their list (kept until
+        a subscription changes)."""
+        dsts = self._subscribers.get(src, [])
+        template = empty(len(dsts), src=src, srci=self._index[src], dst=dsts,
+                         dsti=[self._index[d] for d in dsts])
+        fan = self._fans[src] = (template, TEXTS.code(broadcast_dsts(dsts)) if dsts else NO_TEXT)
+        return fan
 
     def _keep(self, msg: Any, n: int) -> int:
         key = self._next_obj
@@ -171,7 +186,10 @@ class FleetNetwork:
         self._out, self._out_keys, self._counter = [], [], 0
         out = join(segs)
         if len(segs) > 1:
-            out = out[np.lexsort((np.concatenate([k[1] for k in keys]), np.concatenate([k[0] for k in keys])))]
+            phase, order = np.concatenate([k[0] for k in keys]), np.concatenate([k[1] for k in keys])
+            ahead = (phase[1:] < phase[:-1]) | ((phase[1:] == phase[:-1]) & (order[1:] < order[:-1]))
+            if ahead.any():   # something sent by a drone's hooks: put it before that drone's Report
+                out = out[np.lexsort((order, phase))]
         m = len(out)
         t, tick = self._time.t_s, self._time.tick
         delay = np.full(m, self.latency_s)

@@ -94,12 +94,14 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"n must be >= 1, got {args.n}")
     tmp = None if args.out else Path(tempfile.mkdtemp(prefix="swarmbox-bench-"))
     try:
-        m = hover_run(args.n, args.hover_s, args.out or tmp / "run", [f"backend.jit={args.jit}", f"run.core={args.core}"])
+        m = hover_run(args.n, args.hover_s, args.out or tmp / "run",
+                      [f"backend.jit={args.jit}", f"run.core={args.core}"])
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
     ticks, wall = m["ticks"], m["wall_time_s"]
-    print(json.dumps({"system": "swarmbox", "core": args.core, "n": args.n, "status": m["status"], "sim_s": m["sim_time_s"],
+    print(json.dumps({"system": "swarmbox", "core": args.core, "n": args.n, "status": m["status"],
+                      "sim_s": m["sim_time_s"],
                       "loop_wall_s": round(wall, 4), "rtf": round(m["real_time_factor"], 3),
                       "agent_steps_per_s": round(args.n * ticks / wall) if wall > 0 else None,
                       "loop_cpu_s": round(m["loop_cpu_s"] or float("nan"), 4),

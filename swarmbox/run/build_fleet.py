@@ -93,15 +93,16 @@ def build_fleet_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> 
                     timing=timing, mission=info, params=params,
                     rng=build.rng_for(seed, f"algo/{node_name(node_id)}"))
 
-    ground = FleetGround(build._algorithm(cfg.algo.ground, GroundAlgorithm, "ground"), ids, **common(GROUND_ID))
+    ground = FleetGround(build._algorithm(cfg.algo.ground, GroundAlgorithm, "ground"), ids,
+                         **common(GROUND_ID))
     backend = build.backend_of(cfg, mission, timing.tick_s, seed, recorder.root.parent)
     fleet = FleetState(ids)
     agents = [FleetAgent(i, fleet=fleet, k=k, superior=topo.superiors[i], vehicle=vehicle,
                          algorithm=build._algorithm(cfg.algo.drone, DroneAlgorithm, "drone"), **common(i))
               for k, (i, vehicle) in enumerate(zip(ids, backend.vehicles, strict=True))]
     event_logs = {i: recorder.node(i).appender("events") for i in ids}
-    swarm = FleetSwarm(fleet=fleet, network=network, rows=rows, time=time, tick_s=timing.tick_s, ground=ground,
-                       agents=agents, backend=backend, event_logs=event_logs)
+    swarm = FleetSwarm(fleet=fleet, network=network, rows=rows, time=time, tick_s=timing.tick_s,
+                       ground=ground, agents=agents, backend=backend, event_logs=event_logs)
     swarm.state_log = FleetCoreStateLog(swarm, recorder, timing.state_every_ticks)
     return swarm
 

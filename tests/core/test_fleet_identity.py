@@ -35,14 +35,18 @@ def _fly(run_dir: Path, core: str, overrides: list[str], homes: dict[int, list[f
     return json.loads((run_dir / "run.json").read_text())
 
 
-def assert_same_run(tmp_path: Path, overrides: list[str], homes: dict[int, list[float]] | None = None) -> dict:
+def _tables(run_dir: Path) -> list[Path]:
+    return sorted(p.relative_to(run_dir) for p in (run_dir / "logs").rglob("*.parquet"))
+
+
+def assert_same_run(tmp_path: Path, overrides: list[str], homes: dict[int, list[float]] | None = None,
+                    ) -> dict:
     """Both cores fly ``overrides``; every table and the outcome must be equal. Returns run.json."""
     obj = _fly(tmp_path / "object", "object", overrides, homes)
     fleet = _fly(tmp_path / "fleet", "fleet", overrides, homes)
     assert {k: obj.get(k) for k in _OUTCOME} == {k: fleet.get(k) for k in _OUTCOME}
-    files = sorted(p.relative_to(tmp_path / "object") for p in (tmp_path / "object" / "logs").rglob("*.parquet"))
-    assert files == sorted(p.relative_to(tmp_path / "fleet")
-                           for p in (tmp_path / "fleet" / "logs").rglob("*.parquet"))
+    files = _tables(tmp_path / "object")
+    assert files == _tables(tmp_path / "fleet")
     for f in files:   # in the order the logs are written: per node, as the rows happened
         assert_frame_equal(pd.read_parquet(tmp_path / "object" / f), pd.read_parquet(tmp_path / "fleet" / f),
                            check_exact=True, obj=str(f))
@@ -87,16 +91,15 @@ def test_formation_on_a_lossy_jittery_network_logs_equal(tmp_path, seed):
 def test_liveness_logs_equal(tmp_path, seed):
     """Short liveness limits on a lossy network: drones are lost and rejoin at the ground, and lose
     their superior and abort (failsafe events, the ground's head-count and min_alive)."""
-    manifest = assert_same_run(tmp_path, [*HOVER, "network.loss_prob=0.6", "run.lost_inferior_ticks=2",
-                                          "run.lost_superior_ticks=4", f"seed={seed}"], grid(6))
+    assert_same_run(tmp_path, [*HOVER, "network.loss_prob=0.6", "run.lost_inferior_ticks=2",
+                               "run.lost_superior_ticks=4", f"seed={seed}"], grid(6))
     events = pd.read_parquet(tmp_path / "fleet" / "logs" / "ground" / "events.parquet")
     assert {"inferior_lost", "inferior_rejoined"} <= set(events["name"])
 
 
 def test_coarse_state_rows_and_node_clocks_logs_equal(tmp_path):
-    assert_same_run(tmp_path, [*HOVER, "run.state_every_ticks=4", "network=wifi",
-                               "run.clocks={drone_2: {offset_s: 0.5, drift_ppm: 100}, ground: {offset_s: -0.1}}"],
-                    grid(5))
+    clocks = "run.clocks={drone_2: {offset_s: 0.5, drift_ppm: 100}, ground: {offset_s: -0.1}}"
+    assert_same_run(tmp_path, [*HOVER, "run.state_every_ticks=4", "network=wifi", clocks], grid(5))
 
 
 def test_proximity_alerts_logs_equal(tmp_path):
@@ -116,7 +119,8 @@ def test_proximity_alerts_logs_equal(tmp_path):
 ])
 def test_what_the_fleet_core_does_not_cover_is_refused_before_anything_is_written(tmp_path, override, what):
     cfg, choices = compose_config([*HOVER, override, "run.core=fleet", "run.progress=false"])
-    with pytest.raises(ConfigError, match=rf"run.core=fleet does not cover {re.escape(what)}.* yet; use run.core=object"):
+    refused = rf"run.core=fleet does not cover {re.escape(what)}.* yet; use run.core=object"
+    with pytest.raises(ConfigError, match=refused):
         execute(cfg, tmp_path / "run", choices, [override])
     assert not (tmp_path / "run").exists()
 

@@ -126,7 +126,8 @@ class FleetNetwork:
         if not n:
             return
         mtype, nbytes, sent = MESSAGE_TYPE_CODES[type(msg)], msg.nbytes, msg.t_sent_s
-        self.rows.one(src, (sent, self._time.tick, SEND, msg.msg_id, mtype, src, BROADCAST, nbytes, sent, text))
+        self.rows.one(src, (sent, self._time.tick, SEND, msg.msg_id, mtype, src, BROADCAST, nbytes, sent,
+                            text))
         seg = template.copy()
         seg["msg_id"], seg["mtype"], seg["nbytes"], seg["t_sent"] = msg.msg_id, mtype, nbytes, sent
         seg["obj"], seg["stage"] = self._keep(msg, n), msg.stage if mtype == HEARTBEAT else -1

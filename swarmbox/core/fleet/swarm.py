@@ -132,7 +132,8 @@ class FleetSwarm(Swarm):
         if to_ground.any():
             reports = to_ground & (due["obj"] < 0)
             self.ground.due = due[reports]
-            self.ground.acks = [m for m in net.objects(due["obj"][to_ground & ~reports]) if type(m) is TaskAck]
+            others = net.objects(due["obj"][to_ground & ~reports])
+            self.ground.acks = [m for m in others if type(m) is TaskAck]
         k = due["dsti"] - 1
         to_drone = ~to_ground
         confirms = to_drone & (due["mtype"] == HEARTBEAT) & (due["stage"] == f.stage[np.maximum(k, 0)])
@@ -160,7 +161,8 @@ class FleetSwarm(Swarm):
         terminal = (stage == TERMINATION) | (stage == ABORT)
         loop = (stage == PREPARATION) | (stage == EXECUTION)
         watch = f.heard & ~terminal
-        full = (f.busy | f.sticky | (~f.link_ok & ~terminal) | (watch & (f.sup_silent + 1 > self._lost_superior)))
+        fires = watch & (f.sup_silent + 1 > self._lost_superior)   # the watchdog hands over or aborts
+        full = f.busy | f.sticky | (~f.link_ok & ~terminal) | fires
         rest = ~full
         f.sup_silent[watch & rest] += 1
         hooks = rest & loop

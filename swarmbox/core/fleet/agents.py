@@ -19,7 +19,7 @@ import numpy as np
 
 from swarmbox.api import Telemetry
 from swarmbox.core.agent import AgentNode
-from swarmbox.core.messages import _REPORT_FIXED, make_msg_id
+from swarmbox.core.messages import make_msg_id
 from swarmbox.core.stages import TERMINAL, Stage
 
 _TELEMETRY = methodcaller("telemetry")
@@ -155,14 +155,3 @@ class FleetAgent(AgentNode):
         fleet counted it): the stage's hooks and setpoint; returns ``complete``."""
         self._own = None
         return self._stage_work(self.telemetry, now)
-
-
-def report_columns(fleet: FleetState, data: list[str], now: np.ndarray, values: np.ndarray) -> dict[str, Any]:
-    """Every drone's Report of this tick (to the ground) as columns; ``data``: their texts;
-    ``values``: the state columns at the start of the tick (estimated position and velocity first)."""
-    fleet.seq += 1
-    return {"src": fleet.ids, "srci": np.arange(1, fleet.n + 1, dtype=np.int32), "dst": -1, "dsti": 0,
-            "msg_id": fleet.msg_id_base | fleet.seq, "t_sent": now, "stage": fleet.stage,
-            "complete": fleet.complete, "alive": (fleet.stage != ABORT).astype(np.int32),
-            "pos": values[0:3].T, "vel": values[3:6].T,
-            "nbytes": _REPORT_FIXED + np.fromiter(map(len, data), np.int32, fleet.n)}

@@ -118,9 +118,13 @@ class FleetGround(GroundNode):
         new = ~(self.joined[k] & self.alive[k])
         if new.any():
             self._arrivals(k, new)
-        last = len(k) - 1 - np.unique(k[::-1], return_index=True)[1]   # each drone's latest Report
+        counts = np.bincount(k, minlength=len(self.received))
+        self.received += counts
+        if counts.max() > 1:   # each drone's latest Report (several arrive in one tick with jitter)
+            last = len(k) - 1 - np.unique(k[::-1], return_index=True)[1]
+        else:
+            last = np.arange(len(k))
         src = k[last]
-        self.received += np.bincount(k, minlength=len(self.received))
         self.silent[src] = 0
         self.rep_stage[src], self.rep_complete[src] = due["stage"][last], due["complete"][last]
         self.rep_alive[src] = due["alive"][last]

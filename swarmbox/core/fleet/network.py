@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from swarmbox.core.clock import NodeClock, TimeSource
-from swarmbox.core.fleet.rows import MessageRows
+from swarmbox.core.fleet.rows import MESSAGE_ROW, MessageRows
 from swarmbox.core.messages import BROADCAST, MESSAGE_TYPE_CODES, NET_ID, Heartbeat, Report, broadcast_dsts
 from swarmbox.core.rows import DROP, NO_TEXT, RECV, SEND, TEXTS
 
@@ -164,19 +164,27 @@ class FleetNetwork:
         self._singles = []
 
     # -- batches ---------------------------------------------------------------------------------
-    def send_reports(self, seg: np.ndarray, n: int, data: list[str]) -> None:
-        """Every drone's Report of this tick (``seg``: their records, drones in fleet order; ``data``:
-        their texts); each goes out after whatever its drone's hooks sent."""
-        seg["data"] = -1
+    def reports(self, src: list[int], dst: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        """Records and send rows for one Report from each of ``src`` to its ``dst``, with every field
+        that stays the same from tick to tick (:meth:`send_reports` fills in the rest)."""
+        n = len(src)
+        seg = empty(n, src=src, srci=[self._index[s] for s in src], dst=dst,
+                    dsti=[self._index[d] for d in dst], mtype=REPORT, obj=-1)
+        rows = np.zeros(n, dtype=MESSAGE_ROW)
+        rows["kind"], rows["type"], rows["src"], rows["dst"], rows["reason"] = SEND, REPORT, src, dst, NO_TEXT
+        return seg, rows
+
+    def send_reports(self, seg: np.ndarray, rows: np.ndarray, data: list[str]) -> None:
+        """Every drone's Report of this tick (``seg``: their records, ``rows`` their send rows, drones
+        in fleet order; ``data``: their texts); each goes out after whatever its drone's hooks sent."""
         for k in [k for k, text in enumerate(data) if text]:   # usually none
             seg["data"][k] = self._keep(data[k], 1)
         self._settle()
-        self.rows.block(seg["src"], {"t_s": seg["t_sent"], "tick": self._time.tick, "kind": SEND,
-                                "msg_id": seg["msg_id"], "type": REPORT, "src": seg["src"],
-                                "dst": seg["dst"], "nbytes": seg["nbytes"], "t_sent_s": seg["t_sent"],
-                                "reason": NO_TEXT}, n)
+        rows["t_s"] = rows["t_sent_s"] = seg["t_sent"]
+        rows["tick"], rows["msg_id"], rows["nbytes"] = self._time.tick, seg["msg_id"], seg["nbytes"]
+        self.rows.add(seg["src"], rows)
         self._out.append(seg)
-        self._out_keys.append((seg["srci"].astype(np.int64), np.full(n, 1 << 40)))
+        self._out_keys.append((seg["srci"].astype(np.int64), np.full(len(seg), 1 << 40)))
 
     def route(self) -> None:
         """Impair this tick's messages in send order: drop rows for the lost, the rest in flight."""
@@ -227,7 +235,13 @@ class FleetNetwork:
 
     def _forget(self, keys: np.ndarray) -> None:
         """Objects handed over (or lost) for some of their destinations."""
-        keys, counts = np.unique(keys[keys >= 0], return_counts=True)
+        keys = keys[keys >= 0]
+        if not len(keys):
+            return
+        if keys[0] == keys[-1] and (keys == keys[0]).all():   # one Heartbeat's copies
+            keys, counts = keys[:1], np.array([len(keys)])
+        else:
+            keys, counts = np.unique(keys, return_counts=True)
         for key, count in zip(keys.tolist(), counts.tolist(), strict=True):
             entry = self._objects[key]
             entry[1] -= count

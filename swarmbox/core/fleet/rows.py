@@ -44,6 +44,12 @@ class MessageRows:
         self._chunks.append((np.broadcast_to(np.asarray(nodes, dtype=np.int16), (n,)), rows))
         self.rows += n
 
+    def add(self, nodes: np.ndarray, rows: np.ndarray) -> None:
+        """Ready rows (``MESSAGE_ROW`` records), written by ``nodes``."""
+        self._settle()
+        self._chunks.append((nodes, rows))
+        self.rows += len(rows)
+
     def _settle(self) -> None:
         if self._single_rows:
             rows = np.array(self._single_rows, dtype=MESSAGE_ROW)

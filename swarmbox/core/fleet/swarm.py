@@ -29,12 +29,11 @@ from swarmbox.core.fleet.agents import (
     TERMINATION,
     FleetAgent,
     FleetState,
-    report_columns,
 )
 from swarmbox.core.fleet.ground import FleetGround
-from swarmbox.core.fleet.network import HEARTBEAT, REPORT, FleetNetwork, empty
+from swarmbox.core.fleet.network import HEARTBEAT, FleetNetwork
 from swarmbox.core.fleet.rows import MessageRows
-from swarmbox.core.messages import TaskAck
+from swarmbox.core.messages import _REPORT_FIXED, TaskAck
 from swarmbox.core.stages import Stage
 from swarmbox.core.swarm import Outcome, Swarm
 
@@ -76,6 +75,7 @@ class FleetSwarm(Swarm):
         self._landed = np.empty(fleet.n, dtype=bool)
         self._crashed = getattr(self.backend, "crashed", None)
         self.now = np.zeros(fleet.n)
+        self._reports: tuple[np.ndarray, np.ndarray] | None = None   # see network.reports
 
     # -- the loop ----------------------------------------------------------------------------------
     def run(self, max_sim_time_s: float, speed: float = 1.0,
@@ -195,7 +195,16 @@ class FleetSwarm(Swarm):
             else:
                 f.complete[k] = agents[k].fleet_hooks(now[k])
     def send_reports(self) -> None:
+        """Every drone's Report, from the arrays (the superiors are fixed: every drone under the ground)."""
         f = self.fleet
+        if self._reports is None:
+            self._reports = self.network.reports(f.ids.tolist(), [a.superior for a in self.agents])
+        seg, rows = (x.copy() for x in self._reports)
         data = list(map(DATA, self.agents))
-        seg = empty(f.n, obj=-1, mtype=REPORT, **report_columns(f, data, self.now, self._values))
-        self.network.send_reports(seg, f.n, data)
+        f.seq += 1
+        seg["msg_id"], seg["t_sent"] = f.msg_id_base | f.seq, self.now
+        seg["stage"], seg["complete"] = f.stage, f.complete
+        seg["alive"] = f.stage != ABORT
+        seg["pos"], seg["vel"] = self._values[0:3].T, self._values[3:6].T
+        seg["nbytes"] = _REPORT_FIXED + np.fromiter(map(len, data), np.int32, f.n)
+        self.network.send_reports(seg, rows, data)

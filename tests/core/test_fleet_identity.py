@@ -130,3 +130,22 @@ def test_an_unknown_core_is_refused(tmp_path):
     with pytest.raises(ConfigError, match="run.core must be one of object, fleet, got 'arrays'"):
         execute(cfg, tmp_path / "run", choices, [])
     assert not (tmp_path / "run").exists()
+
+
+RQ4_ALGOS = [f"delivery_{a}_{b}" for a in ("none", "azimuth", "distance") for b in ("block", "rr", "dynamic")]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("algo", RQ4_ALGOS)
+def test_rq4_ci_runs_logs_equal(tmp_path, algo, seed):
+    """The RQ4 CI preset's runs: reliable tasks (acknowledged, re-sent), Report texts, five drones."""
+    manifest = assert_same_run(tmp_path, [f"algo={algo}", "mission=delivery", "mission.generator.count=15",
+                                          "mission.generator.half_size_m=50.0", "run.state_every_ticks=2",
+                                          f"seed={seed}"])
+    assert manifest["status"] == "ok", manifest["reason"]
+
+
+@pytest.mark.parametrize("algo", ["crossing", "formation9", "flocking"])
+def test_shipped_missions_logs_equal(tmp_path, algo):
+    manifest = assert_same_run(tmp_path, [f"algo={algo}"])
+    assert manifest["status"] == "ok", manifest["reason"]

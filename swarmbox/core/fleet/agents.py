@@ -45,7 +45,7 @@ class FleetState:
         self.sup_silent = np.zeros(n, dtype=np.int64)
         self.heard = np.zeros(n, dtype=bool)
         self.busy = np.zeros(n, dtype=bool)      # messages for the node's own inbox this tick
-        self.sticky = np.zeros(n, dtype=bool)    # ever had a task or an alert: always ticks in Python
+        self.sticky = np.zeros(n, dtype=bool)    # reliable tasks held or an alert in force: ticks in Python
         self.tels: list[Telemetry] = [None] * n  # type: ignore[list-item]  # this tick's readings
         self.armed = np.zeros(n, dtype=bool)     # ... as arrays
         self.landed = np.ones(n, dtype=bool)
@@ -149,6 +149,8 @@ class FleetAgent(AgentNode):
         self.complete = self._stage_work(tel, now)
         if self.stage in TERMINAL and (not tel.armed or self.stage_timed_out()):
             self.finished = True
+        # held reliable tasks or a proximity alert in force: the inbox is drained every tick
+        self._fleet.sticky[self._k] = bool(self._window_busy or self.proximity)
 
     def fleet_hooks(self, now: float) -> bool:
         """The tick of a drone in a loop stage with nothing in its inbox and its watchdog quiet (the

@@ -146,7 +146,6 @@ class FleetSwarm(Swarm):
         mine = to_drone & ~fast
         if mine.any():
             f.busy |= slow
-            f.sticky[k[mine & (due["mtype"] != HEARTBEAT)]] = True
             for drone, msg in zip(k[mine].tolist(), net.objects(due["obj"][mine]), strict=True):
                 self.agents[drone].inbox.append(msg)
         net.release(due["obj"])

@@ -24,7 +24,7 @@ from swarmbox.hal.mavsim.options import MavsimOptions
 from swarmbox.hal.px4.params import Px4Params
 from swarmbox.hal.px4.sitl import SitlOptions
 from swarmbox.hal.sim.params import SimParams
-from swarmbox.run import build, build_fleet, mission
+from swarmbox.run import build, mission
 from swarmbox.run.build import ConfigError
 from swarmbox.run.mission import Mission, MissionError
 from swarmbox.run.params import ParamsError, typed_params
@@ -43,7 +43,7 @@ def check(cfg: DictConfig) -> Mission:
     _faults(cfg, m)
     _backend(cfg.backend)
     _algo(cfg.algo)
-    build_fleet.check(cfg, m)   # run.core: what the fleet core does not cover is refused here
+    build.check_core(cfg, m)   # run.core: what the fleet core does not cover is refused here
     return m
 
 

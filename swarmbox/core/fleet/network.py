@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from swarmbox.core.clock import NodeClock, TimeSource
-from swarmbox.core.fleet.rows import MESSAGE_ROW, MessageRows
+from swarmbox.core.fleet.rows import MESSAGE_ROW, MessageRows, take
 from swarmbox.core.messages import BROADCAST, MESSAGE_TYPE_CODES, NET_ID, Heartbeat, Report, broadcast_dsts
 from swarmbox.core.rows import DROP, NO_TEXT, RECV, SEND, TEXTS
 
@@ -198,7 +198,7 @@ class FleetNetwork:
             phase, order = np.concatenate([k[0] for k in keys]), np.concatenate([k[1] for k in keys])
             ahead = (phase[1:] < phase[:-1]) | ((phase[1:] == phase[:-1]) & (order[1:] < order[:-1]))
             if ahead.any():   # something sent by a drone's hooks: put it before that drone's Report
-                out = out[np.lexsort((order, phase))]
+                out = take(out, np.lexsort((order, phase)))
         m = len(out)
         t, tick = self._time.t_s, self._time.tick
         delay = np.full(m, self.latency_s)
@@ -215,7 +215,7 @@ class FleetNetwork:
         out["arrival"] = t + delay
         if lost.any():
             self._drop(out, lost, t, tick)
-            out = out[~lost]
+            out = take(out, ~lost)
         self._enqueue(out)
 
     def _drop(self, out: np.ndarray, lost: np.ndarray, t: float, tick: int) -> None:
@@ -251,7 +251,7 @@ class FleetNetwork:
     def _enqueue(self, out: np.ndarray) -> None:
         both = join([self.pending, out]) if len(self.pending) else out
         if self.jitter_s:   # the heap's order: arrival, then send tick, then send order
-            both = both[np.lexsort((both["order"], both["tick"], both["arrival"]))]
+            both = take(both, np.lexsort((both["order"], both["tick"], both["arrival"])))
         self.pending = both
 
     def deliver(self) -> np.ndarray:

@@ -32,7 +32,7 @@ from swarmbox.core.fleet.agents import (
 )
 from swarmbox.core.fleet.ground import FleetGround
 from swarmbox.core.fleet.network import HEARTBEAT, FleetNetwork
-from swarmbox.core.fleet.rows import MessageRows
+from swarmbox.core.fleet.rows import MessageRows, take
 from swarmbox.core.messages import _REPORT_FIXED, TaskAck
 from swarmbox.core.stages import Stage
 from swarmbox.core.swarm import Outcome, Swarm
@@ -131,7 +131,7 @@ class FleetSwarm(Swarm):
         to_ground = due["dsti"] == 0
         if to_ground.any():
             reports = to_ground & (due["obj"] < 0)
-            self.ground.due = due[reports]
+            self.ground.due = take(due, reports)
             others = net.objects(due["obj"][to_ground & ~reports])
             self.ground.acks = [m for m in others if type(m) is TaskAck]
         k = due["dsti"] - 1

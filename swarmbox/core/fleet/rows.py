@@ -25,6 +25,13 @@ def take(records: np.ndarray, index: np.ndarray) -> np.ndarray:
     return raw[index].view(records.dtype)
 
 
+def concat(parts: list[np.ndarray]) -> np.ndarray:
+    """The records of ``parts`` in order, copied as whole records (see :func:`take`)."""
+    dtype = parts[0].dtype
+    raw = np.dtype((np.void, dtype.itemsize))
+    return np.concatenate([p.view(raw) for p in parts]).view(dtype)
+
+
 class MessageRows:
     """Buffered ``messages`` rows of every node, handed to the nodes' logs by :meth:`hand_over`."""
 
@@ -70,11 +77,7 @@ class MessageRows:
         if not self._chunks:
             return
         nodes = np.concatenate([c[0] for c in self._chunks])
-        rows = np.empty(len(nodes), dtype=MESSAGE_ROW)   # slice copies: numpy's structured concatenate
-        start = 0                                          # costs more per part
-        for _, part in self._chunks:
-            rows[start:start + len(part)] = part
-            start += len(part)
+        rows = concat([part for _, part in self._chunks])
         self._chunks, self.rows = [], 0
         order = np.argsort(nodes, kind="stable")
         nodes, rows = nodes[order], take(rows, order)

@@ -70,3 +70,21 @@ def test_a_mismatch_names_the_tables(tmp_path):
                             workdir=tmp_path)
     with pytest.raises(BatchMismatch, match="not a FleetAlgorithm"):
         check_batch_matches(["algo=hover"], ["algo=hover"], workdir=tmp_path / "same")
+
+
+@pytest.mark.slow
+def test_a_batch_algorithm_flies_in_the_processes_runtime_as_a_fleet_of_one(tmp_path):
+    # one process per drone, real sockets, wall-clock pacing: each drone's FleetAlgorithm drives one
+    # row; logs cannot be bit-equal to another run here (wall clock), the flight's shape can
+    import pandas as pd
+
+    cfg, choices = compose(["algo=hover_batch", "run.runtime=processes", "run.progress=false"])
+    manifest = fly(cfg, choices, tmp_path)
+    assert manifest["status"] == "ok", manifest["reason"]
+    for i, (n, _) in enumerate([(0.0, 0), (5.0, 0), (10.0, 0), (15.0, 0)]):
+        logs = tmp_path / "logs" / f"drone_{i}"
+        ev = pd.read_parquet(logs / "events.parquet")
+        assert (ev["name"] == "reached_altitude").sum() == 1, i
+        assert (ev["name"] == "exec_complete").sum() >= 1, i
+        sp = pd.read_parquet(logs / "setpoints.parquet")
+        assert len(sp) > 100 and (sp["n"] == n).all() and (sp["e"] == 0.0).all() and (sp["d"] == -3.0).all()

@@ -2,7 +2,8 @@
 
 ``python -m swarmbox.bench.hover N [--hover-s S] [--algo hover|hover_batch] [--out DIR]`` — the
 SwarmBox side of the interleaved benchmark. The grid and the run are built exactly as ``python -m
-swarmbox.run algo=hover mission=hover`` would build them, with ``initial_positions`` replaced by an N-drone grid.
+swarmbox.run algo=hover mission=hover`` would build them, with ``initial_positions`` replaced by an
+N-drone grid.
 """
 
 from __future__ import annotations

@@ -85,3 +85,17 @@ def test_bad_batch_hook_output_fails_the_run_naming_hook_and_drones(run, cls, wo
     for w in words:
         assert w in manifest["reason"], manifest["reason"]
     assert json.loads((d / "run.json").read_text())["reason"] == manifest["reason"]
+
+
+def test_the_algorithm_suite_checks_a_batch_algorithm_per_drone(tmp_path):
+    from swarmbox.api import Stage
+    from swarmbox.testing import check_algorithm
+
+    report = check_algorithm(["algo=hover_batch"], workdir=tmp_path)
+    calls = report.traces[0].calls
+    for i in range(4):
+        mine = [(hook, stage) for node, hook, stage in calls if node == f"drone_{i}"]
+        assert mine.count(("prep_once", Stage.PREPARATION)) == 1
+        assert mine.count(("exec_once", Stage.EXECUTION)) == 1
+        assert mine.index(("exec_once", Stage.EXECUTION)) < mine.index(("exec_loop", Stage.EXECUTION))
+        assert mine.count(("exec_loop", Stage.EXECUTION)) > 100

@@ -99,3 +99,18 @@ def test_the_algorithm_suite_checks_a_batch_algorithm_per_drone(tmp_path):
         assert mine.count(("exec_once", Stage.EXECUTION)) == 1
         assert mine.index(("exec_once", Stage.EXECUTION)) < mine.index(("exec_loop", Stage.EXECUTION))
         assert mine.count(("exec_loop", Stage.EXECUTION)) > 100
+
+
+@pytest.mark.slow
+def test_bad_batch_hook_output_fails_a_processes_run_naming_each_drone(tmp_path, monkeypatch):
+    from swarmbox.testing.runs import compose, fly
+    from tests.conftest import ROOT
+
+    monkeypatch.setenv("PYTHONPATH", str(ROOT))   # the node processes import tests.api.algos
+    cfg, choices = compose([*HOVER, "algo.drone._target_=tests.api.algos.WrongShape", "run.runtime=processes",
+                            "run.progress=false"])
+    manifest = fly(cfg, choices, tmp_path)
+    assert manifest["status"] == "failed"
+    for i in range(4):   # each process drives a fleet of one
+        assert (f"drone_{i} failed: AlgorithmError: drone {i}: exec_loop returned setpoints of shape (0, 3)"
+                in manifest["reason"]), manifest["reason"]

@@ -5,6 +5,8 @@ and another's GNSS drifting, so that stage changes, hand-overs, lost inferiors a
 random draws are all part of what must match.
 """
 
+from pathlib import Path
+
 import pytest
 
 from swarmbox.core.batch import FleetDriver
@@ -88,3 +90,17 @@ def test_a_batch_algorithm_flies_in_the_processes_runtime_as_a_fleet_of_one(tmp_
         assert (ev["name"] == "exec_complete").sum() >= 1, i
         sp = pd.read_parquet(logs / "setpoints.parquet")
         assert len(sp) > 100 and (sp["n"] == n).all() and (sp["e"] == 0.0).all() and (sp["d"] == -3.0).all()
+
+
+FAULT_DIR = Path(__file__).parents[2] / "swarmbox" / "conf" / "fault"
+FAULT_PRESETS = sorted(p.stem for p in FAULT_DIR.glob("*.yaml")
+                       if p.stem not in ("none", "gps_failure"))   # gps_failure: PX4's failure injection
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("fault", FAULT_PRESETS)
+@pytest.mark.parametrize("algo, extra", [("formation", ["topology=tree"]),
+                                         ("flocking", ["algo.params.flock_s=40"])])
+def test_batch_ports_write_the_per_drone_logs_under_every_fault_preset(tmp_path, fault, algo, extra):
+    check_batch_matches([f"algo={algo}"], [f"algo={algo}_batch"], workdir=tmp_path,
+                        extra=[f"fault={fault}", *extra])

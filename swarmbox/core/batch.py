@@ -34,40 +34,38 @@ _NO_ROW = (True, None)
 
 
 class HeldTransport:
-    """An agent's transport that can hold its calls (``hold``) and replay them in order (``release``)."""
+    """An agent's transport that can hold its calls (``hold``) and replay them in order (``release``).
+
+    Not holding, its methods are the network's own (bound ones, swapped in): no cost per message.
+    """
+
+    _CALLS = ("send", "publish", "subscribe", "unsubscribe")
 
     def __init__(self, net: Any) -> None:
         self.net = net
-        self._held: list[tuple[Callable, tuple]] | None = None
+        self.has_subscribers = net.has_subscribers
+        self._held: list[tuple[Callable, tuple]] = []
+        held = self._held
+        self._holding = {name: _holder(held, getattr(net, name)) for name in self._CALLS}
+        self._direct = {name: getattr(net, name) for name in self._CALLS}
+        self.__dict__.update(self._direct)
 
     def hold(self) -> None:
-        self._held = []
+        self.__dict__.update(self._holding)
 
     def release(self) -> None:
-        held, self._held = self._held, None
-        for fn, args in held or ():
-            fn(*args)
+        self.__dict__.update(self._direct)
+        held = self._held
+        if held:
+            for fn, args in held:
+                fn(*args)
+            held.clear()
 
-    def _call(self, fn: Callable, *args: Any) -> None:
-        if self._held is None:
-            fn(*args)
-        else:
-            self._held.append((fn, args))
 
-    def send(self, msg: Any, dst: int) -> None:
-        self._call(self.net.send, msg, dst)
-
-    def publish(self, msg: Any) -> None:
-        self._call(self.net.publish, msg)
-
-    def subscribe(self, subscriber: int, publisher: int) -> None:
-        self._call(self.net.subscribe, subscriber, publisher)
-
-    def unsubscribe(self, subscriber: int, publisher: int) -> None:
-        self._call(self.net.unsubscribe, subscriber, publisher)
-
-    def has_subscribers(self, publisher: int) -> bool:
-        return self.net.has_subscribers(publisher)
+def _holder(held: list, fn: Callable) -> Callable:
+    def hold(*args: Any) -> None:
+        held.append((fn, args))
+    return hold
 
 
 class FleetMember:

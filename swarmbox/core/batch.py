@@ -110,6 +110,10 @@ class FleetDriver:
         self._set_up = False
         self._stepped = -1   # the tick whose rows are in _results
         self._results: list[tuple[bool, Setpoint | None]] = [_NO_ROW] * len(self.agents)
+        # each row's last (n, e, d, yaw, kind) and its Setpoint (None: a NaN row)
+        self._packed = np.full((len(self.agents), 5), np.nan)
+        self._packed[:, 4] = -1.0   # no kind: the first row of every drone is new
+        self._last: list[Setpoint | None] = [None] * len(self.agents)
 
     @classmethod
     def adopt(cls, agents: Sequence[Any]) -> FleetDriver | None:
@@ -147,9 +151,7 @@ class FleetDriver:
         fleet = self.fleet
         fleet.refresh()
         self._stepped = self._time.tick
-        results = self._results
-        for i in range(fleet.n):
-            results[i] = _NO_ROW
+        results = self._results = [_NO_ROW] * fleet.n
         stage = fleet.stage
         live = np.array([not a.removed for a in self.agents], dtype=bool)
         prep = np.flatnonzero((stage == _PREP) & live)
@@ -220,40 +222,50 @@ class FleetDriver:
         if type(out) is not FleetSetpoints:
             raise AlgorithmError(f"{self._who()}: exec_loop returned {type(out).__name__}, "
                                  "expected FleetSetpoints or None")
-        ned, kinds, yaws = self._checked(out, rows)
-        sps = {}
-        for i, (n, e, d), kind, yaw in zip(rows.tolist(), ned, kinds, yaws, strict=True):
-            if n != n and e != e and d != d:   # a NaN row: no setpoint for this drone this tick
-                continue
-            if not (math.isfinite(n) and math.isfinite(e) and math.isfinite(d)) or math.isinf(yaw):
-                raise AlgorithmError(f"drone {int(self.fleet.ids[i])}: exec_loop row {i} is not finite "
-                                     f"(ned {(n, e, d)}, yaw {yaw}); a row of NaN means no setpoint")
-            # Setpoint built as Setpoint.position & co. build it (NaN yaw: keep the heading)
-            sps[i] = tuple.__new__(Setpoint, (kind, (n, e, d), None if yaw != yaw else yaw))
-        return sps
+        packed = self._checked(out, rows)
+        # A row bit for bit as last tick's gets last tick's Setpoint: a hover's rows never change
+        same = (packed.view(np.int64) == self._packed[rows].view(np.int64)).all(axis=1)
+        self._packed[rows] = packed
+        last = self._last
+        changed = np.flatnonzero(~same)
+        for i, (n, e, d, yaw, kind) in zip(rows[changed].tolist(), packed[changed].tolist(), strict=True):
+            last[i] = self._setpoint(i, n, e, d, yaw, _KINDS[int(kind)])
+        return {i: last[i] for i in rows.tolist() if last[i] is not None}
 
-    def _checked(self, out: FleetSetpoints, rows: np.ndarray) -> tuple[list, list, list]:
-        """The rows' (ned, kind, yaw) as Python values, or an AlgorithmError naming what is wrong."""
+    def _setpoint(self, i: int, n: float, e: float, d: float, yaw: float,
+                  kind: SetpointKind) -> Setpoint | None:
+        if n != n and e != e and d != d:   # a NaN row: no setpoint for this drone this tick
+            return None
+        if not (math.isfinite(n) and math.isfinite(e) and math.isfinite(d)) or math.isinf(yaw):
+            raise AlgorithmError(f"drone {int(self.fleet.ids[i])}: exec_loop row {i} is not finite "
+                                 f"(ned {(n, e, d)}, yaw {yaw}); a row of NaN means no setpoint")
+        # built as Setpoint.position & co. build it (NaN yaw: keep the heading)
+        return tuple.__new__(Setpoint, (kind, (n, e, d), None if yaw != yaw else yaw))
+
+    def _checked(self, out: FleetSetpoints, rows: np.ndarray) -> np.ndarray:
+        """The rows' (n, e, d, yaw, kind) as one float array, or an AlgorithmError naming what is wrong."""
         n = self.fleet.n
         ned = np.asarray(out.ned)
         if ned.shape != (n, 3) or ned.dtype.kind != "f":
             raise AlgorithmError(f"{self._who()}: exec_loop returned setpoints of shape {ned.shape} "
                                  f"({ned.dtype}), expected floats of shape ({n}, 3) (one row per drone)")
+        packed = np.empty((rows.size, 5))
+        packed[:, :3] = ned[rows]
         kind = out.kind
         if isinstance(kind, SetpointKind):
-            kinds = [kind] * rows.size
+            packed[:, 4] = int(kind)
         else:
             k = np.asarray(kind)
             if k.shape != (n,) or k.dtype.kind not in "iu" or not np.isin(k[rows], list(_KINDS)).all():
                 raise AlgorithmError(f"{self._who()}: exec_loop returned kinds {k.dtype} of shape {k.shape}, "
                                      f"expected a SetpointKind or SetpointKind codes of shape ({n},)")
-            kinds = [_KINDS[c] for c in k[rows].tolist()]
+            packed[:, 4] = k[rows]
         if out.yaw_rad is None:
-            yaws = [math.nan] * rows.size
+            packed[:, 3] = math.nan
         else:
             yaw = np.asarray(out.yaw_rad)
             if yaw.shape != (n,) or yaw.dtype.kind != "f":
                 raise AlgorithmError(f"{self._who()}: exec_loop returned yaw of shape {yaw.shape} "
                                      f"({yaw.dtype}), expected None or floats of shape ({n},)")
-            yaws = yaw[rows].tolist()
-        return ned[rows].tolist(), kinds, yaws
+            packed[:, 3] = yaw[rows]
+        return packed

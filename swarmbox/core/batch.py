@@ -9,7 +9,7 @@ in :mod:`swarmbox.api.fleet`.
 Two phases per tick (:meth:`FleetDriver.tick_agents`): every agent's inbound half (telemetry,
 inbox, watchdog), then the loop hooks once for the fleet, then every agent's outbound half
 (setpoint, Heartbeat/Report, rows). Between the halves an agent's calls on the network are held
-(:class:`HeldTransport`) and go out at the start of its outbound half: the network then sees
+(:class:`CallHolder`) and go out at the start of its outbound half: the network then sees
 exactly the calls, in exactly the order, of agents ticking one after the other — the order its
 random draws (loss, jitter) and its queues depend on — so a FleetAlgorithm and the DroneAlgorithm it
 ports write the same logs. In ``run.runtime=processes`` an agent is a fleet of one and ticks as
@@ -33,39 +33,35 @@ _KINDS = {int(k): k for k in SetpointKind}
 _NO_ROW = (True, None)
 
 
-class HeldTransport:
-    """An agent's transport that can hold its calls (``hold``) and replay them in order (``release``).
+class CallHolder:
+    """Stands in for an agent's transport between the halves of a tick: keeps its calls, in order,
+    for :meth:`replay` at the start of the agent's outbound half."""
 
-    Not holding, its methods are the network's own (bound ones, swapped in): no cost per message.
-    """
-
-    _CALLS = ("send", "publish", "subscribe", "unsubscribe")
+    __slots__ = ("net", "calls")
 
     def __init__(self, net: Any) -> None:
         self.net = net
-        self.has_subscribers = net.has_subscribers
-        self._held: list[tuple[Callable, tuple]] = []
-        held = self._held
-        self._holding = {name: _holder(held, getattr(net, name)) for name in self._CALLS}
-        self._direct = {name: getattr(net, name) for name in self._CALLS}
-        self.__dict__.update(self._direct)
+        self.calls: list[tuple[Callable, tuple]] = []
 
-    def hold(self) -> None:
-        self.__dict__.update(self._holding)
+    def send(self, msg: Any, dst: int) -> None:
+        self.calls.append((self.net.send, (msg, dst)))
 
-    def release(self) -> None:
-        self.__dict__.update(self._direct)
-        held = self._held
-        if held:
-            for fn, args in held:
-                fn(*args)
-            held.clear()
+    def publish(self, msg: Any) -> None:
+        self.calls.append((self.net.publish, (msg,)))
 
+    def subscribe(self, subscriber: int, publisher: int) -> None:
+        self.calls.append((self.net.subscribe, (subscriber, publisher)))
 
-def _holder(held: list, fn: Callable) -> Callable:
-    def hold(*args: Any) -> None:
-        held.append((fn, args))
-    return hold
+    def unsubscribe(self, subscriber: int, publisher: int) -> None:
+        self.calls.append((self.net.unsubscribe, (subscriber, publisher)))
+
+    def has_subscribers(self, publisher: int) -> bool:
+        return self.net.has_subscribers(publisher)
+
+    def replay(self) -> None:
+        for fn, args in self.calls:
+            fn(*args)
+        self.calls.clear()
 
 
 class FleetMember:
@@ -108,6 +104,7 @@ class FleetDriver:
         self.members = [FleetMember(self, i) for i in range(len(self.agents))]
         self._time = self.agents[0].time
         self._set_up = False
+        self._holders: list[CallHolder] = []   # set by adopt: the driver ticks the agents itself
         self._stepped = -1   # the tick whose rows are in _results
         self._results: list[tuple[bool, Setpoint | None]] = [_NO_ROW] * len(self.agents)
         # each row's last (n, e, d, yaw, kind) and its Setpoint (None: a NaN row)
@@ -131,18 +128,21 @@ class FleetDriver:
         driver = cls(members[0].algorithm, agents)
         for agent, member in zip(agents, driver.members, strict=True):
             agent.algorithm = member
-            agent.net = HeldTransport(agent.net)
+        driver._holders = [CallHolder(agent.net) for agent in agents]
         return driver
 
     # -- the tick (object core, one process) ----------------------------------------------------
-    def tick_agents(self, agents: Sequence[Any]) -> None:
-        """One tick of ``agents`` (those not removed, in row order): inbound halves, hooks, outbound."""
-        for agent in agents:
-            agent.net.hold()
+    def tick_agents(self) -> None:
+        """One tick of every agent not removed, in row order: inbound halves, hooks, outbound halves."""
+        live = [(a, h) for a, h in zip(self.agents, self._holders, strict=True) if not a.removed]
+        for agent, holder in live:
+            agent.net = holder   # its network calls wait for its outbound half
             agent.begin_tick()
         self.step()
-        for agent in agents:
-            agent.net.release()
+        for agent, holder in live:
+            agent.net = holder.net
+            if holder.calls:
+                holder.replay()
             agent.finish_tick()
 
     def step(self) -> None:

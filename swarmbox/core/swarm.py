@@ -103,7 +103,7 @@ class Swarm:
         self.medium.deliver_due()
         self.ground.tick()
         if self.fleet_driver is not None:
-            self.fleet_driver.tick_agents([a for a in self.agents if not a.removed])
+            self.fleet_driver.tick_agents()
         else:
             for agent in self.agents:
                 if not agent.removed:

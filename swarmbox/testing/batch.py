@@ -95,6 +95,5 @@ def split_fleet(swarm: Any) -> None:
     if driver is None:
         raise ValueError("split_fleet: the swarm's drones do not run a FleetAlgorithm")
     for agent in swarm.agents:   # a copy of the instance no hook has touched yet: a fresh one per drone
-        agent.net = agent.net.net   # no longer held: the agent ticks whole, alone
         agent.algorithm = FleetDriver(copy.deepcopy(driver.algorithm), [agent]).members[0]
     swarm.fleet_driver = None

@@ -28,6 +28,7 @@ from swarmbox.core.batch import FleetDriver
 from swarmbox.core.delivery import DELIVERED, NEW, Window
 from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck, TaskCommand
 from swarmbox.core.node import STAGE_OF, AlgorithmError, Node, call_hook, hook_error
+from swarmbox.core.ports import Vehicle
 from swarmbox.core.rows import NO_TEXT, TEXTS, pack_setpoint
 from swarmbox.core.stages import TERMINAL, Stage, path_to
 
@@ -50,7 +51,8 @@ _OK_CODE = TEXTS.code("ok")
 
 
 class AgentNode(Node):
-    def __init__(self, node_id: int, *, superior: int, algorithm: DroneAlgorithm | FleetAlgorithm, vehicle,
+    def __init__(self, node_id: int, *, superior: int, algorithm: DroneAlgorithm | FleetAlgorithm,
+                 vehicle: Vehicle,
                  **kw) -> None:
         super().__init__(node_id, **kw)
         # its own frozen copies: a hook that writes them fails, and no other node sees a change

@@ -27,7 +27,8 @@ def _algorithm_classes():
             continue
         module = importlib.import_module(f"swarmbox.algorithms.{path.stem}")
         for _, cls in inspect.getmembers(module, inspect.isclass):
-            if cls.__module__ == module.__name__ and issubclass(cls, DroneAlgorithm | FleetAlgorithm | GroundAlgorithm):
+            roles = DroneAlgorithm | FleetAlgorithm | GroundAlgorithm
+            if cls.__module__ == module.__name__ and issubclass(cls, roles):
                 yield f"{cls.__module__}.{cls.__qualname__}"
 
 

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 from swarmbox.api.algorithm import DroneAlgorithm, GroundAlgorithm
 from swarmbox.api.context import DroneContext, GroundContext
-from swarmbox.api.fleet import Fleet, FleetAlgorithm, FleetSetpoints, row_norms
 from swarmbox.api.types import (
     DescendantState,
     DroneState,
@@ -53,3 +52,15 @@ __all__ = [
     "SetpointKind", "SetpointVerdict", "Stage", "Task", "Telemetry", "Vec3", "mission_area",
     "mission_grid", "row_norms", "wrap_angle",
 ]
+
+#: The batch API (``swarmbox.api.fleet``), loaded on first use: it needs numpy, and importing
+#: ``swarmbox.api`` alone (``swarmbox check --help``, a config check) should not pay for it.
+_FLEET_NAMES = frozenset({"Fleet", "FleetAlgorithm", "FleetSetpoints", "row_norms"})
+
+
+def __getattr__(name: str) -> object:
+    if name in _FLEET_NAMES:
+        from swarmbox.api import fleet
+
+        return getattr(fleet, name)
+    raise AttributeError(f"module 'swarmbox.api' has no attribute {name!r}")

@@ -26,10 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from hydra.utils import get_class
 from omegaconf import DictConfig, open_dict
-
-from swarmbox.api import DroneAlgorithm, FleetAlgorithm
 
 
 class BatchMismatch(AssertionError):
@@ -53,6 +50,10 @@ def check_batch_matches(per_drone: Sequence[str], batch: Sequence[str], *, workd
     Raises :class:`BatchMismatch` listing the differing tables (or a run that failed, or configs that
     do not name a DroneAlgorithm and a FleetAlgorithm); returns both runs otherwise.
     """
+    # Hydra and the batch API (numpy) load only when a check runs
+    from hydra.utils import get_class
+
+    from swarmbox.api import DroneAlgorithm, FleetAlgorithm
     from swarmbox.testing.runs import compare_logs, compose, fly, search_path_override
 
     common = [*extra, f"seed={seed}", "run.progress=false"]

@@ -86,3 +86,13 @@ class WritesArrays(HoverFleet):
     def exec_loop(self, fleet, rows):
         fleet.pos_ned_m[0, 0] = 1.0
         return None
+
+
+class BadKind(HoverFleet):
+    def exec_loop(self, fleet, rows):
+        return FleetSetpoints(np.full(fleet.n, 7), self.target)
+
+
+class BadYaw(HoverFleet):
+    def exec_loop(self, fleet, rows):
+        return FleetSetpoints.position(self.target, np.zeros(fleet.n + 1))

@@ -78,6 +78,9 @@ def test_reliable_tasks_reach_the_batch_on_task_in_order_once_each_like_per_dron
                  "expected a bool array of shape (4,)"]),
     ("ReturnsSetpoint", ["exec_loop returned tuple, expected FleetSetpoints or None"]),
     ("Raises", ["fleet of 4 drones: exec_complete raised KeyError: 'no such thing'"]),
+    ("BadKind", ["exec_loop returned kinds int64 of shape (4,)",
+                 "expected a SetpointKind or SetpointKind codes"]),
+    ("BadYaw", ["exec_loop returned yaw of shape (5,) (float64), expected None or floats of shape (4,)"]),
 ])
 def test_bad_batch_hook_output_fails_the_run_naming_hook_and_drones(run, cls, words):
     manifest, d = run(*HOVER, f"algo.drone._target_=tests.api.algos.{cls}")

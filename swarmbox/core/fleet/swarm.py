@@ -177,8 +177,9 @@ class FleetSwarm(Swarm):
 
     def run_hooks(self, full: np.ndarray, hooks: np.ndarray) -> None:
         """The drones that tick in Python, in fleet order: ``full`` the whole tick (messages in their
-        inbox, a watchdog firing), ``hooks`` only their loop stage's hooks. A batch hook would be
-        called here for ``hooks`` (and for the drones of ``full`` in a loop stage) instead."""
+        inbox, a watchdog firing), ``hooks`` only their loop stage's hooks. A batch algorithm
+        (``swarmbox.api.fleet``, not covered yet) would have its loop hooks called here once, for
+        ``hooks`` and the drones of ``full`` in a loop stage, after every ``full`` drone's inbox."""
         net, agents, f = self.network, self.agents, self.fleet
         f.fetch(self._vehicles, full.tolist())
         f.fetch(self._vehicles, hooks.tolist())

@@ -16,9 +16,7 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -30,8 +28,15 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import yaml
 
+from swarmbox.analysis.arrowpool import arrow_pool as _arrow_pool
+from swarmbox.analysis.arrowpool import disk_bytes as _disk_bytes
+from swarmbox.analysis.rundirs import find_runs, find_unfinished
 from swarmbox.record.broadcast import expand_broadcasts
 from swarmbox.record.schema import READABLE_VERSIONS, SCHEMA_VERSION, TABLES
+
+__all__ = ["EXPECTED", "GROUND", "NET", "REQUIRED", "RunData", "RunLoadError", "empty_table", "find_runs",
+           "find_unfinished", "load_run", "node_id", "node_kind", "read_arrow", "read_config",
+           "read_manifest", "read_table"]
 
 GROUND = -1
 NET = -2
@@ -345,64 +350,9 @@ def _read_table(table: str, indices: list[int], jobs: list[tuple[int, Path, str]
     return _concat(table, [data for data in results if data is not None], columns)
 
 
-@contextmanager
-def _arrow_pool(large: bool) -> Iterator[None]:
-    """While a large run loads, Arrow allocates from a pool that gives freed memory back at once.
-
-    The default pool (mimalloc) kept what the reads and the conversion to pandas freed: 1.4 GB beyond
-    the 0.9 GB of frames of an 80 s 1,000-drone hover, growing with the run. jemalloc with no decay
-    returns it (without jemalloc, the system allocator returns most); the default pool is restored
-    after. A small run stays on the default pool: a sweep's worker reuses its few MB for the next run.
-    """
-    if not large:
-        yield
-        return
-    before = pa.default_memory_pool()
-    try:
-        pa.jemalloc_set_decay_ms(0)
-        pool = pa.jemalloc_memory_pool()
-    except NotImplementedError:   # a pyarrow built without jemalloc
-        pool = pa.system_memory_pool()
-    pa.set_memory_pool(pool)
-    try:
-        yield
-    finally:
-        pa.set_memory_pool(before)
-        before.release_unused()
-
-
-
-def _disk_bytes(paths: Iterable[Path]) -> int:
-    """Total size of the files among ``paths`` that exist."""
-    total = 0
-    for path in paths:
-        try:
-            total += path.stat().st_size
-        except OSError:
-            pass   # absent: read_arrow says so
-    return total
-
-
 def _concat(table: str, parts: list[pa.Table], columns: tuple[str, ...] | None = None) -> pd.DataFrame:
     parts[:] = [p for p in parts if len(p)]
     if not parts:
         frame = empty_table(table)
         return frame if columns is None else frame[[c for c in frame.columns if c in columns or c == "node"]]
     return _to_frame(table, parts)
-
-
-def find_unfinished(root: str | Path) -> list[Path]:
-    """Directories at or below ``root`` that hold a run's files (config.yaml or logs/) but no run.json:
-    runs that were killed, or still run."""
-    root = Path(root)
-    marks = [*root.rglob("config.yaml"), *(p for p in root.rglob("logs") if p.is_dir())]
-    dirs = {p.parent for p in marks}
-    return sorted(d for d in dirs if not (d / "run.json").is_file())
-
-
-def find_runs(root: str | Path) -> list[Path]:
-    """Every run directory (one holding ``run.json``) at or below ``root``, sorted by path."""
-    root = Path(root)
-    if (root / "run.json").is_file():
-        return [root]
-    return sorted(p.parent for p in root.rglob("run.json") if p.is_file())

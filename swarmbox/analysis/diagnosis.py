@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from swarmbox.analysis import metrics, network, sampling
+from swarmbox.analysis import metrics, network, sampling, windows
 from swarmbox.analysis.load import GROUND, RunData
 from swarmbox.analysis.unify import T
 
@@ -271,24 +271,77 @@ def _episodes(flags: np.ndarray, persist: int) -> list[tuple[int, int]]:
             for a, b in zip(starts, stops, strict=True) if b - a >= persist]
 
 
-def scan(series: Series, opts: DiagnosisOptions | None = None) -> pd.DataFrame:
-    """Every alarm episode: t_u (alarm), metric, drone, value, score, median, iqr, end_u (last flag)."""
+def scan(series: Series, opts: DiagnosisOptions | None = None, chunk: int | None = None) -> pd.DataFrame:
+    """Every alarm episode: t_u (alarm), metric, drone, value, score, median, iqr, end_u (last flag).
+
+    The grid is scanned ``chunk`` points at a time (default: one analysis window,
+    :mod:`~swarmbox.analysis.windows`): the fences are per grid point, so only the chunk's sorted copy
+    is held, and a flag run that crosses a chunk's edge carries on into the next (:class:`_Runs`)."""
     opts = opts or DiagnosisOptions()
-    rows = []
+    chunk = chunk if chunk is not None else windows.points(series.step_s)
+    if chunk < 1:
+        raise ValueError(f"chunk must be >= 1 grid point, not {chunk}")
+    rows: list[dict] = []
     for metric in METRICS:
         mat = series.values.get(metric)
         if mat is None:
             continue
-        score, med, iqr = outlier_matrix(mat, opts.threshold(metric), opts.rule, opts.min_n)
-        for j, drone in enumerate(series.drones):
-            flagged = ~np.isnan(score[:, j])
-            for first, last in _episodes(flagged, opts.persist_points(series.step_s)):
-                rows.append({T: series.ticks[first] * series.step_s, "metric": metric, "drone": int(drone),
-                             "value": float(mat[first, j]), "score": float(score[first, j]),
-                             "median": float(med[first]), "iqr": float(iqr[first]),
-                             "end_u": series.ticks[last] * series.step_s})
-    out = pd.DataFrame(rows, columns=ALARM_COLUMNS)
-    return _ordered(out)
+        runs = _Runs(len(series.drones), opts.persist_points(series.step_s))
+        for lo in range(0, len(mat), chunk):
+            part = mat[lo:lo + chunk]
+            score, med, iqr = outlier_matrix(part, opts.threshold(metric), opts.rule, opts.min_n)
+            runs.feed(lo, ~np.isnan(score), (part, score, med, iqr))
+        for j, first, last, seen in runs.close(len(mat)):
+            value, sc, median, spread = seen
+            rows.append({T: series.ticks[first] * series.step_s, "metric": metric,
+                         "drone": int(series.drones[j]), "value": value, "score": sc, "median": median,
+                         "iqr": spread, "end_u": series.ticks[last] * series.step_s})
+    return _ordered(pd.DataFrame(rows, columns=ALARM_COLUMNS))
+
+
+class _Runs:
+    """Runs of consecutive flags per column, fed chunk by chunk of rows: a run still open at a chunk's
+    end goes on in the next. A run of at least ``persist`` rows is an episode whose alarm is its
+    ``persist``-th row; what that row showed (value, score, median, IQR) is kept while its chunk is at
+    hand."""
+
+    def __init__(self, columns: int, persist: int) -> None:
+        self.persist = persist
+        self.start = np.full(columns, -1, dtype=np.int64)   # row where the open run began, -1: none
+        self.seen: dict[int, tuple] = {}                     # column -> its open run's alarm row values
+        self.done: list[tuple[int, int, int, tuple]] = []    # column, alarm row, last row, values
+
+    def feed(self, lo: int, flags: np.ndarray, shown: tuple[np.ndarray, ...]) -> None:
+        """Rows ``lo``.. of every column (``flags``: rows x columns); ``shown``: the chunk's values and
+        scores (rows x columns) and medians and IQRs (rows)."""
+        active = np.flatnonzero(flags.any(axis=0) | (self.start >= 0))
+        for j in active.tolist():
+            edges = np.diff(np.concatenate([[self.start[j] >= 0], flags[:, j]]).astype("int8"))
+            starts = (lo + np.flatnonzero(edges == 1)).tolist()
+            stops = (lo + np.flatnonzero(edges == -1)).tolist()
+            if self.start[j] >= 0:
+                starts.insert(0, int(self.start[j]))
+            for k, a in enumerate(starts):
+                alarm = a + self.persist - 1
+                if lo <= alarm < lo + len(flags) and (k >= len(stops) or stops[k] > alarm):
+                    i = alarm - lo   # the run reaches its persistence in this chunk
+                    value, score, med, iqr = shown
+                    self.seen[j] = (float(value[i, j]), float(score[i, j]), float(med[i]), float(iqr[i]))
+                if k < len(stops):
+                    self._end(j, a, stops[k])
+            self.start[j] = starts[-1] if len(starts) > len(stops) else -1
+
+    def _end(self, j: int, a: int, stop: int) -> None:
+        if stop - a >= self.persist:
+            self.done.append((j, a + self.persist - 1, stop - 1, self.seen.pop(j)))
+        self.seen.pop(j, None)
+
+    def close(self, rows: int) -> list[tuple[int, int, int, tuple]]:
+        """Every episode, the runs still open ending at ``rows``."""
+        for j in np.flatnonzero(self.start >= 0).tolist():
+            self._end(j, int(self.start[j]), rows)
+        self.start[:] = -1
+        return self.done
 
 
 def _ordered(alarms: pd.DataFrame) -> pd.DataFrame:

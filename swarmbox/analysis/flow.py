@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
+from swarmbox.analysis import windows
 from swarmbox.analysis.load import NET
 from swarmbox.analysis.unify import T
 
@@ -34,6 +35,8 @@ LAT = "latency_ms"
 #: still be its receive.
 SLACK_S = 0.005
 _FIT = 2**62   # packed keys stay below this (int64)
+#: Margin on a window's reach: an event this far beyond what a window can match is still handed to it.
+_EDGE_S = 1e-6
 
 
 def _ints(series: pd.Series, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -192,6 +195,52 @@ class Window:
         return out
 
 
+def first_by_window(keys: np.ndarray, t_send: np.ndarray, e_keys: np.ndarray, e_t: np.ndarray,
+                    e_val: np.ndarray, missing: float, slack_s: float, max_latency_s: float,
+                    width_s: float) -> np.ndarray:
+    """:meth:`Window.first` of every send, worked out per send-time window of ``width_s``.
+
+    A send of window [a, b) can only be answered by an event in [a - slack, b + max latency], and only
+    a repeat of its key sent before b + max latency + slack can close its window early: each window
+    takes those events and sends (a look-ahead bounded by the run's latency bound, so a message in
+    flight across the window's edge is still matched) and nothing else. The answers are those of one
+    window over the whole run. Sends with no time take their key's first event, from the events of
+    their keys alone."""
+    out = np.full(len(keys), missing, dtype=e_val.dtype)
+    timed = ~np.isnan(t_send)
+    if not (np.isfinite(width_s) and np.isfinite(max_latency_s)) or not timed.any():
+        return Window(t_send, slack_s, max_latency_s).first(keys, e_keys, e_t, e_val, missing)
+    if not timed.all():
+        loose = np.flatnonzero(~timed)
+        mine = np.isin(e_keys, keys[loose])
+        out[loose] = Window(t_send[loose], slack_s, max_latency_s).first(keys[loose], e_keys[mine], e_t[mine],
+                                                                       e_val[mine], missing)
+    sends = np.flatnonzero(timed)
+    sends = sends[np.argsort(t_send[sends], kind="stable")]
+    s_t = t_send[sends]
+    e_order = np.argsort(e_t, kind="stable")   # unknown times last: they answer no timed send
+    e_sorted = e_t[e_order]
+    reach = max_latency_s + slack_s + _EDGE_S   # beyond what a comparison's rounding could move
+    first_w = np.floor(s_t[0] / width_s)
+    for w in np.arange(first_w, np.floor(s_t[-1] / width_s) + 1):
+        a, b = w * width_s, (w + 1) * width_s
+        lo, hi = np.searchsorted(s_t, [a, b], side="left")
+        if w == first_w:
+            lo = 0   # rounding of a / width_s: the first window starts at the first send, the last
+        if b > s_t[-1]:
+            hi = len(s_t)   # ends at the last
+        if lo == hi:
+            continue   # an empty window: nothing was sent in it
+        ahead = np.searchsorted(s_t, b + reach, side="right")
+        mine = sends[lo:ahead]   # the window's sends, then the later ones that can close their windows
+        e_lo, e_hi = np.searchsorted(e_sorted, [s_t[lo] - reach, s_t[hi - 1] + reach])
+        ev = np.sort(e_order[e_lo:e_hi])   # log order among equal times, as over the whole run
+        got = Window(t_send[mine], slack_s, max_latency_s).first(keys[mine], e_keys[ev], e_t[ev], e_val[ev],
+                                                                 missing)
+        out[sends[lo:hi]] = got[:hi - lo]
+    return out
+
+
 def _next_later(keys: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Per send: the next strictly later send time with the same key (inf: none; keys that never
     repeat, the usual case, cost one sort)."""
@@ -225,8 +274,12 @@ def _first_arrivals(messages: pd.DataFrame, recv: np.ndarray) -> tuple[np.ndarra
 
 
 def message_flow(messages: pd.DataFrame, tick_s: float = 0.0, max_latency_s: float = np.inf,
-                 slack_s: float = SLACK_S) -> pd.DataFrame:
-    """One row per (message, destination); see :func:`swarmbox.analysis.network.message_flow`."""
+                 slack_s: float = SLACK_S, window_s: float | None = None) -> pd.DataFrame:
+    """One row per (message, destination); see :func:`swarmbox.analysis.network.message_flow`.
+
+    Sends are matched to their receives and drops per send-time window of ``window_s`` (default: the
+    analysis window, :mod:`~swarmbox.analysis.windows`; see :func:`first_by_window`)."""
+    width = windows.window_s() if window_s is None else window_s
     kind_codes, kind_words = _codes(messages["kind"])
     send, drop, recv = (np.flatnonzero(kind_codes == _code(kind_words, k)) for k in ("send", "drop", "recv"))
     msg_id, m_known = _ints(messages["msg_id"], send)
@@ -241,13 +294,15 @@ def message_flow(messages: pd.DataFrame, tick_s: float = 0.0, max_latency_s: flo
 
     t_send = messages[T].to_numpy(dtype=np.float64)[send]
     (s_t,) = _known(keyed, t_send)
-    window = Window(s_t, slack_s, max_latency_s)
-    t_recv = _spread(keyed, window.first(keys, r_keys, r_t, r_t, np.nan), np.nan)
+    arrival = first_by_window(keys, s_t, r_keys, r_t, r_t, np.nan, slack_s, max_latency_s, width)
+    t_recv = _spread(keyed, arrival, np.nan)
+    del arrival
     reason_codes, reason_words = _codes(messages["reason"])
     reason = np.full(len(send), -1, dtype=np.int64)
     if len(drop):   # the first drop reason (by time, then in log order: the sorts are stable)
         x_t = messages[T].to_numpy(dtype=np.float64)[drop]
-        first = window.first(keys, x_keys, x_t, reason_codes[drop].astype(np.int64), -1)
+        first = first_by_window(keys, s_t, x_keys, x_t, reason_codes[drop].astype(np.int64), -1, slack_s,
+                                max_latency_s, width)
         reason = _spread(keyed, first, -1)
 
     if keyed.all():   # (msg_id, dst) as their one key, ordered alike: the same order from one key less

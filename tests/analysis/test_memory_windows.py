@@ -1,0 +1,141 @@
+"""The analyzer's window: a run analysed in many small windows gives the tables of one window over the
+whole run, on a real run whose faults put messages in flight across window edges (a 600 ms link on
+drone 1), a clock step (drone 2), a node removed (drone 3, its messages lost) and alarms that persist
+across the diagnosis' chunk edges; and the edges themselves (a boundary at a send or receive time, a
+message in flight longer than a window, empty windows, one tick)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from swarmbox.analysis import diagnosis as dg
+from swarmbox.analysis import flow as fl
+from swarmbox.analysis import sampling, windows
+from swarmbox.analysis.load import load_run
+from swarmbox.analysis.report import ANALYZED_COLUMNS, analyze_run
+from swarmbox.analysis.unify import T, unify
+from tests.analysis.test_memory import _tables
+from tests.conftest import run_config
+
+FAULTY = ("algo=hover", "mission=hover", "algo.params.hover_s=10", "network=wifi",
+          "fault=[clock_skew,crash,latency]", "fault.clock_skew.targets=[2]", "fault.clock_skew.onset_s=5",
+          "fault.crash.targets=[3]", "fault.crash.onset_s=7", "fault.latency.targets=[1]",
+          "fault.latency.onset_s=4", "fault.latency.latency_ms=600")
+SMALL_S = 0.1   # four grid points of 25 ms: the 600 ms messages cross six windows
+
+
+@pytest.fixture(scope="module")
+def faulty_run(tmp_path_factory):
+    run_dir = tmp_path_factory.mktemp("window") / "faulty"
+    manifest = run_config(run_dir, FAULTY)
+    assert manifest["status"] == "ok", manifest["reason"]
+    return run_dir
+
+
+def _analysis(run_dir, monkeypatch, window: str):
+    monkeypatch.setenv(windows.ENV, window)
+    return analyze_run(load_run(run_dir, ANALYZED_COLUMNS))
+
+
+def test_many_windows_give_the_tables_of_one(faulty_run, monkeypatch):
+    one = _analysis(faulty_run, monkeypatch, "inf")
+    many = _analysis(faulty_run, monkeypatch, str(SMALL_S))
+    assert one.problems == many.problems
+    np.testing.assert_equal(one.scalars, many.scalars)
+    for name, frame in _tables(one).items():
+        pd.testing.assert_frame_equal(frame, _tables(many)[name], check_exact=True, obj=name)
+    # the faults did what the windows must survive
+    assert (one.clocks["life"] > 0).any()                                   # a clock step
+    assert one.flow["lost"].any() and (one.flow["latency_ms"] > 5 * SMALL_S * 1e3).any()
+    grid = float(one.finding["grid_s"].iloc[0])
+    assert ((one.alarms["end_u"] - one.alarms[T]) > SMALL_S + grid).any()    # an alarm across chunks
+    assert one.finding["detected"].iloc[0]
+
+
+def _unified(run_dir):
+    run = load_run(run_dir, ANALYZED_COLUMNS)
+    unify(run)
+    return run
+
+
+def _flows(msgs, run, widths) -> list[pd.DataFrame]:
+    return [fl.message_flow(msgs, sampling.tick_s(run), sampling.max_latency_s(run), window_s=w) for w in widths]
+
+
+def _same(flows: list[pd.DataFrame]) -> None:
+    for other in flows[1:]:
+        pd.testing.assert_frame_equal(flows[0], other, check_exact=True)
+
+
+def test_a_window_edge_at_a_send_or_a_receive_loses_no_match(faulty_run):
+    """Window boundaries placed exactly on a send time and on a receive time (w * width == t): the
+    message on the edge is matched as over the whole run."""
+    run = _unified(faulty_run)
+    whole = _flows(run.tables["messages"], run, [np.inf])[0]
+    slow = whole[whole["latency_ms"] > 500].iloc[len(whole) // 1000]
+    for t in (slow["t_send"], slow["t_recv"]):
+        width = t / 3   # the third edge is the send (or receive) time itself
+        assert 3 * width == t or (np.floor(t / width) == 3 and 3 * width == pytest.approx(t))
+        got = _flows(run.tables["messages"], run, [width])[0]
+        pd.testing.assert_frame_equal(whole, got, check_exact=True)
+    assert slow["delivered"]
+
+
+def test_messages_in_flight_longer_than_a_window_and_empty_windows(faulty_run):
+    """A width of 5 ms: every 600 ms message is in flight for 120 windows, and four windows in five hold
+    no send (sends come on 25 ms ticks)."""
+    run = _unified(faulty_run)
+    msgs = run.tables["messages"]
+    whole, narrow = _flows(msgs, run, [np.inf, 0.005])
+    _same([whole, narrow])
+    sent = whole["t_send"].to_numpy()
+    bins = np.unique(np.floor(sent[np.isfinite(sent)] / 0.005))
+    assert len(bins) < 0.5 * (bins[-1] - bins[0])   # most windows are empty
+    assert (whole["latency_ms"] > 100 * 5).sum() > 10
+
+
+def test_one_tick(faulty_run):
+    """The message rows of a single tick, and a diagnosis series one grid point long."""
+    run = load_run(faulty_run)   # every column: the tick of each message row
+    unify(run)
+    msgs = run.tables["messages"]
+    tick = int(msgs["tick"].median())
+    one = msgs[msgs["tick"] == tick].reset_index(drop=True)
+    flows = _flows(one, run, [np.inf, 0.001, 0.025])
+    _same(flows)
+    # sent in the run's only tick, received in none: in flight at its end unless the network dropped it
+    only = flows[0]
+    assert len(only) and not only["delivered"].any()
+    assert only["counted"].any() and (only["lost"] == only["counted"]).all()
+    assert only["drop_reason"][only["counted"]].notna().all()
+    series = dg.drone_series(run)
+    single = dg.Series(series.ticks[:1], series.drones, {k: v[:1] for k, v in series.values.items()},
+                       series.step_s)
+    pd.testing.assert_frame_equal(dg.scan(single, chunk=1), dg.scan(single, chunk=10), check_exact=True)
+
+
+@pytest.mark.parametrize("chunk", [1, 2, 3, 4, 5, 7, 64])
+def test_the_scan_in_chunks_carries_persistence_across_edges(faulty_run, chunk):
+    """Alarms (their start, value, score and end) of the scan in chunks of ``chunk`` grid points equal
+    those of one chunk; persistence is 4 points, so runs of flags cross chunk edges and some reach
+    their persistence in a later chunk than they began."""
+    run = _unified(faulty_run)
+    opts = dg.DiagnosisOptions()
+    series = dg.drone_series(run, opts)
+    whole = dg.scan(series, opts, chunk=len(series.ticks))
+    assert opts.persist_points(series.step_s) == 4 and len(whole) >= 2
+    got = dg.scan(series, opts, chunk=chunk)
+    pd.testing.assert_frame_equal(whole, got, check_exact=True)
+
+
+def test_a_bad_window_is_refused(monkeypatch):
+    for bad in ("0", "-1", "nan", "ten"):
+        monkeypatch.setenv(windows.ENV, bad)
+        with pytest.raises(ValueError, match=windows.ENV):
+            windows.window_s()
+    monkeypatch.setenv(windows.ENV, "inf")
+    assert windows.window_s() == np.inf
+    monkeypatch.delenv(windows.ENV)
+    assert windows.window_s() == windows.DEFAULT_WINDOW_S

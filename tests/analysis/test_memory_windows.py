@@ -61,7 +61,8 @@ def _unified(run_dir):
 
 
 def _flows(msgs, run, widths) -> list[pd.DataFrame]:
-    return [fl.message_flow(msgs, sampling.tick_s(run), sampling.max_latency_s(run), window_s=w) for w in widths]
+    tick, bound = sampling.tick_s(run), sampling.max_latency_s(run)
+    return [fl.message_flow(msgs, tick, bound, window_s=w) for w in widths]
 
 
 def _same(flows: list[pd.DataFrame]) -> None:

@@ -280,6 +280,18 @@ def message_flow(messages: pd.DataFrame, tick_s: float = 0.0, max_latency_s: flo
     Sends are matched to their receives and drops per send-time window of ``window_s`` (default: the
     analysis window, :mod:`~swarmbox.analysis.windows`; see :func:`first_by_window`)."""
     width = windows.window_s() if window_s is None else window_s
+    sends = matched_sends(messages, slack_s, max_latency_s, width)
+    nodes = _distinct(messages["node"].to_numpy())
+    logged = np.sort(nodes[nodes != NET]).astype(np.int64)
+    t_end = float(messages[T].max()) if len(messages) else np.nan
+    return finish_flow(sends, logged, t_end, tick_s)
+
+
+def matched_sends(messages: pd.DataFrame, slack_s: float, max_latency_s: float, width_s: float,
+                  own: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Every send of ``messages`` (only those of the rows ``own`` marks, if given) with its first
+    receive and first drop reason, in the flow's order (send time, msg_id, dst): the columns
+    :func:`finish_flow` completes. Text stays as codes into ``type_words`` and ``reason_words``."""
     kind_codes, kind_words = _codes(messages["kind"])
     send, drop, recv = (np.flatnonzero(kind_codes == _code(kind_words, k)) for k in ("send", "drop", "recv"))
     msg_id, m_known = _ints(messages["msg_id"], send)
@@ -294,7 +306,7 @@ def message_flow(messages: pd.DataFrame, tick_s: float = 0.0, max_latency_s: flo
 
     t_send = messages[T].to_numpy(dtype=np.float64)[send]
     (s_t,) = _known(keyed, t_send)
-    arrival = first_by_window(keys, s_t, r_keys, r_t, r_t, np.nan, slack_s, max_latency_s, width)
+    arrival = first_by_window(keys, s_t, r_keys, r_t, r_t, np.nan, slack_s, max_latency_s, width_s)
     t_recv = _spread(keyed, arrival, np.nan)
     del arrival
     reason_codes, reason_words = _codes(messages["reason"])
@@ -302,42 +314,53 @@ def message_flow(messages: pd.DataFrame, tick_s: float = 0.0, max_latency_s: flo
     if len(drop):   # the first drop reason (by time, then in log order: the sorts are stable)
         x_t = messages[T].to_numpy(dtype=np.float64)[drop]
         first = first_by_window(keys, s_t, x_keys, x_t, reason_codes[drop].astype(np.int64), -1, slack_s,
-                                max_latency_s, width)
+                                max_latency_s, width_s)
         reason = _spread(keyed, first, -1)
-
-    if keyed.all():   # (msg_id, dst) as their one key, ordered alike: the same order from one key less
-        order = np.lexsort((keys, t_send))
+    mine = slice(None) if own is None else np.asarray(own, dtype=bool)[send]
+    if keyed[mine].all():   # (msg_id, dst) as their one key, ordered alike: the same order from one key less
+        order = np.lexsort((_spread(keyed, keys, 0)[mine], t_send[mine]))
     else:
-        order = np.lexsort((_as_column(dst, d_known), _as_column(msg_id, m_known), t_send))   # NaN last
-    # one at a time: each array in log order is freed before the next sorted one is made
-    send = send[order]
-    msg_id = msg_id[order]
-    m_known = m_known[order]
-    dst = dst[order]
-    d_known = d_known[order]
-    t_send = t_send[order]
-    t_recv = t_recv[order]
-    reason = reason[order]
-    del order
-    src, s_known = _ints(messages["src"], send)
+        order = np.lexsort((_as_column(dst, d_known)[mine], _as_column(msg_id, m_known)[mine],
+                            t_send[mine]))   # NaN last
+    if own is not None:
+        order = np.flatnonzero(mine)[order]
+    out = {"send": send, "msg_id": msg_id, "m_known": m_known, "dst": dst, "d_known": d_known,
+           "t_send": t_send, "t_recv": t_recv, "reason": reason}
+    for name in list(out):   # one at a time: each array in log order is freed before its sorted copy is made
+        out[name] = out[name][order]
+    del order, send
+    out["src"], out["s_known"] = _ints(messages["src"], out["send"])
+    out["nbytes"] = messages["nbytes"].to_numpy()[out["send"]].astype(np.float64)
+    if "type" in messages:   # a table loaded without it (no scalar reads it) gives a flow without it
+        type_codes, type_words = _codes(messages["type"])
+        out["type"] = type_codes[out.pop("send")]
+        out["type_words"] = type_words
+    else:
+        del out["send"]
+    out["reason_words"] = reason_words
+    return out
+
+
+def finish_flow(sends: dict[str, np.ndarray], logged: np.ndarray, t_end: float,
+                tick_s: float) -> pd.DataFrame:
+    """The flow of :func:`matched_sends`'s sends: latency, delivered, and which are counted (not in
+    flight at ``t_end``, the last message record, to a destination among the ``logged`` nodes)."""
+    src, s_known, dst, d_known = sends["src"], sends["s_known"], sends["dst"], sends["d_known"]
+    t_send, t_recv, reason = sends["t_send"], sends["t_recv"], sends["reason"]
     lat = (t_recv - t_send) * 1e3
     delivered = ~np.isnan(t_recv)
-    nodes = _distinct(messages["node"].to_numpy())
-    logged = np.sort(nodes[nodes != NET]).astype(np.int64)
-    t_end = float(messages[T].max()) if len(messages) else np.nan
     margin = tick_s if np.isfinite(tick_s) else 0.0
     limit = t_end - _link_max_latency_s(src, dst, s_known & d_known, lat) - margin
     with np.errstate(invalid="ignore"):
         late = t_send > limit
     in_flight = ~delivered & (reason < 0) & late
     counted = np.isin(dst, logged) & d_known & ~in_flight
-    columns = {"msg_id": _as_column(msg_id, m_known)}
-    if "type" in messages:   # a table loaded without it (no scalar reads it) gives a flow without it
-        type_codes, type_words = _codes(messages["type"])
-        columns["type"] = _text(type_codes[send], type_words)
+    columns = {"msg_id": _as_column(sends["msg_id"], sends["m_known"])}
+    if "type" in sends:
+        columns["type"] = _text(sends["type"], sends["type_words"])
     return pd.DataFrame({
         **columns, "src": _as_column(src, s_known), "dst": _as_column(dst, d_known),
-        "nbytes": messages["nbytes"].to_numpy()[send].astype(np.float64), "t_send": t_send, "t_recv": t_recv,
-        "drop_reason": _text(reason, reason_words), LAT: lat, "delivered": delivered, "counted": counted,
-        "lost": counted & ~delivered,
+        "nbytes": sends["nbytes"], "t_send": t_send, "t_recv": t_recv,
+        "drop_reason": _text(reason, sends["reason_words"]), LAT: lat, "delivered": delivered,
+        "counted": counted, "lost": counted & ~delivered,
     }, copy=False)

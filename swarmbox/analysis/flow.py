@@ -36,7 +36,7 @@ LAT = "latency_ms"
 SLACK_S = 0.005
 _FIT = 2**62   # packed keys stay below this (int64)
 #: Margin on a window's reach: an event this far beyond what a window can match is still handed to it.
-_EDGE_S = 1e-6
+EDGE_S = 1e-6
 
 
 def _ints(series: pd.Series, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -220,7 +220,7 @@ def first_by_window(keys: np.ndarray, t_send: np.ndarray, e_keys: np.ndarray, e_
     s_t = t_send[sends]
     e_order = np.argsort(e_t, kind="stable")   # unknown times last: they answer no timed send
     e_sorted = e_t[e_order]
-    reach = max_latency_s + slack_s + _EDGE_S   # beyond what a comparison's rounding could move
+    reach = max_latency_s + slack_s + EDGE_S   # beyond what a comparison's rounding could move
     first_w = np.floor(s_t[0] / width_s)
     for w in np.arange(first_w, np.floor(s_t[-1] / width_s) + 1):
         a, b = w * width_s, (w + 1) * width_s

@@ -81,6 +81,8 @@ class RunData:
     incomplete: bool = False
     #: Tables left in their files (each here an empty frame): the analysis reads them window by window.
     streamed: tuple[str, ...] = ()
+    #: The projection the tables were read with (``load_run``'s ``columns``).
+    columns: dict[str, tuple[str, ...]] | None = None
 
     @property
     def drones(self) -> list[int]:
@@ -283,7 +285,21 @@ def load_run(run_dir: str | Path, columns: dict[str, tuple[str, ...]] | None = N
         from swarmbox.analysis.ulog import add_estimator_events  # PX4 runs: EKF2's markers as events
         tables["events"] = add_estimator_events(run_dir, tables["events"], tables.get("state"))
     tables = {t: tables[t] for t in TABLES}   # in the schema's order, streamed or not
-    return RunData(run_dir, manifest, config, tables, sorted(dirs), problems, incomplete, tuple(streamed))
+    return RunData(run_dir, manifest, config, tables, sorted(dirs), problems, incomplete, tuple(streamed),
+                   columns)
+
+
+def read_streamed(run: RunData, table: str) -> None:
+    """Read a table ``run`` left in its files into ``run.tables``, whole, as :func:`load_run` would have
+    (its files' problems were named when it was loaded)."""
+    dirs = _node_dirs(run.path, [])
+    jobs = [(nid, ndir, table) for nid, ndir in dirs.items()]
+    notes: list[list[str]] = [[] for _ in jobs]
+    threaded = _disk_bytes(ndir / f"{table}.parquet" for _, ndir, _ in jobs) >= _POOL_BYTES
+    with _arrow_pool(threaded):
+        run.tables[table] = _read_table(table, list(range(len(jobs))), jobs, notes, [False] * len(jobs),
+                                        (run.columns or {}).get(table), threaded)
+    run.streamed = tuple(t for t in run.streamed if t != table)
 
 def _read_table(table: str, indices: list[int], jobs: list[tuple[int, Path, str]], notes: list[list[str]],
                 found: list[bool], columns: tuple[str, ...] | None, threaded: bool) -> pd.DataFrame:

@@ -33,7 +33,7 @@ import pandas as pd
 from scipy import stats
 
 from swarmbox.analysis import clock_steps, clockstream, sampling
-from swarmbox.analysis.load import GROUND, NET, RunData, node_id
+from swarmbox.analysis.load import GROUND, NET, RunData, node_id, read_streamed
 
 #: Name of the unified-time column added to every table (seconds on the ground clock).
 T = "t_u"
@@ -281,20 +281,34 @@ def unify(run: RunData, opts: ClockOptions | None = None, sent_times: bool = Tru
     steps = (clock_steps.find_steps(run.tables["state"], tick_s, opts.step_min_s)
              if opts.step_min_s > 0 else [])
     if steps:
+        if "messages" in run.streamed:   # the lives are told apart in each node's whole log
+            read_streamed(run, "messages")
         return _unify_lives(run, opts, steps, tick_s, sent_times)
     return _unify_plain(run, opts, sent_times)
 
 
 def _unify_plain(run: RunData, opts: ClockOptions, sent_times: bool) -> pd.DataFrame:
-    """:func:`unify` with one clock per node."""
-    clocks = estimate_clocks(run.tables["messages"], run.nodes, opts)
-    for frame in run.tables.values():
-        frame[T] = to_unified(frame["t_s"], frame["node"], clocks)
-    if sent_times:
-        msgs = run.tables["messages"]
-        msgs["t_sent_u"] = to_unified(msgs["t_sent_s"], msgs["src"].fillna(GROUND), clocks)
+    """:func:`unify` with one clock per node (from the files, batch by batch, when the messages were left
+    there)."""
+    if "messages" in run.streamed:
+        clocks = estimate_clocks_streamed(run.path, run.nodes, opts)
+    else:
+        clocks = estimate_clocks(run.tables["messages"], run.nodes, opts)
+    for name, frame in run.tables.items():
+        if name != "messages":
+            frame[T] = to_unified(frame["t_s"], frame["node"], clocks)
+    unify_messages(run, clocks, sent_times)
     clocks = clocks.assign(life=0, from_u=np.nan, step_s=0.0)
     return _with_truth(clocks, run.manifest.get("clocks") or {})
+
+
+def unify_messages(run: RunData, clocks: pd.DataFrame, sent_times: bool = True) -> None:
+    """``t_u`` (and ``t_sent_u``, the sender's stamp on the ground clock) of the messages, one clock
+    per node."""
+    msgs = run.tables["messages"]
+    msgs[T] = to_unified(msgs["t_s"], msgs["node"], clocks)
+    if sent_times:
+        msgs["t_sent_u"] = to_unified(msgs["t_sent_s"], msgs["src"].fillna(GROUND), clocks)
 
 
 def _unify_lives(run: RunData, opts: ClockOptions, steps: list[clock_steps.Step], tick_s: float,

@@ -23,6 +23,10 @@ FAULTY = ("algo=hover", "mission=hover", "algo.params.hover_s=10", "network=wifi
           "fault=[clock_skew,crash,latency]", "fault.clock_skew.targets=[2]", "fault.clock_skew.onset_s=5",
           "fault.crash.targets=[3]", "fault.crash.onset_s=7", "fault.latency.targets=[1]",
           "fault.latency.onset_s=4", "fault.latency.latency_ms=600")
+#: The same faults without the clock step: the messages stay in their files and are matched window by
+#: window (a clock step has the analyzer read the whole table: the lives are told apart in each log).
+PLAIN = (*(o for o in FAULTY if "clock_skew" not in o), "fault=[crash,latency]",
+         "run.clocks={drone_2: {offset_s: 0.5, drift_ppm: 100}}")
 SMALL_S = 0.1   # four grid points of 25 ms: the 600 ms messages cross six windows
 
 
@@ -34,24 +38,71 @@ def faulty_run(tmp_path_factory):
     return run_dir
 
 
-def _analysis(run_dir, monkeypatch, window: str):
+@pytest.fixture(scope="module")
+def plain_run(tmp_path_factory):
+    run_dir = tmp_path_factory.mktemp("window") / "plain"
+    manifest = run_config(run_dir, PLAIN)
+    assert manifest["status"] == "ok", manifest["reason"]
+    return run_dir
+
+
+def _analysis(run_dir, monkeypatch, window: str, streamed: tuple[str, ...] = ()):
     monkeypatch.setenv(windows.ENV, window)
-    return analyze_run(load_run(run_dir, ANALYZED_COLUMNS))
+    return analyze_run(load_run(run_dir, ANALYZED_COLUMNS, streamed=streamed))
+
+
+def _equal(one, other) -> None:
+    assert one.problems == other.problems
+    np.testing.assert_equal(one.scalars, other.scalars)
+    for name, frame in _tables(one).items():
+        pd.testing.assert_frame_equal(frame, _tables(other)[name], check_exact=True, obj=name)
 
 
 def test_many_windows_give_the_tables_of_one(faulty_run, monkeypatch):
     one = _analysis(faulty_run, monkeypatch, "inf")
     many = _analysis(faulty_run, monkeypatch, str(SMALL_S))
-    assert one.problems == many.problems
-    np.testing.assert_equal(one.scalars, many.scalars)
-    for name, frame in _tables(one).items():
-        pd.testing.assert_frame_equal(frame, _tables(many)[name], check_exact=True, obj=name)
+    _equal(one, many)
     # the faults did what the windows must survive
     assert (one.clocks["life"] > 0).any()                                   # a clock step
     assert one.flow["lost"].any() and (one.flow["latency_ms"] > 5 * SMALL_S * 1e3).any()
     grid = float(one.finding["grid_s"].iloc[0])
     assert ((one.alarms["end_u"] - one.alarms[T]) > SMALL_S + grid).any()    # an alarm across chunks
     assert one.finding["detected"].iloc[0]
+
+
+@pytest.mark.parametrize("window", ["inf", str(SMALL_S), "3"])
+def test_messages_streamed_from_their_files_give_the_tables_of_the_loaded_run(plain_run, monkeypatch, window):
+    """The messages left in their files (clocks from batches, the flow matched per window from scratch
+    partitions): every table, scalar and problem as when the table is loaded, the flow row for row."""
+    loaded = _analysis(plain_run, monkeypatch, "inf")
+    streamed = _analysis(plain_run, monkeypatch, window, ("messages",))
+    assert streamed.run.streamed == ("messages",) and streamed.run.tables["messages"].empty
+    _equal(loaded, streamed)
+    assert loaded.flow["lost"].any() and (loaded.flow["latency_ms"] > 500).any()
+    assert (loaded.clocks["offset_s"] - loaded.clocks["true_offset_s"]).abs().max() < 1e-3
+
+
+def test_a_clock_step_has_the_streamed_messages_read_whole(faulty_run, monkeypatch):
+    loaded = _analysis(faulty_run, monkeypatch, "inf")
+    streamed = _analysis(faulty_run, monkeypatch, str(SMALL_S), ("messages",))
+    assert streamed.run.streamed == () and len(streamed.run.tables["messages"])
+    _equal(loaded, streamed)
+
+
+def test_the_cli_writes_the_tables_of_the_loaded_run(plain_run, tmp_path, monkeypatch):
+    """``swarmbox analyze`` streams the messages: its files, byte for byte, are those of the loaded run's
+    analysis written the same way."""
+    from swarmbox.analysis.cli import analyze_main
+    from swarmbox.analysis.outputs import write_run
+
+    monkeypatch.setenv(windows.ENV, str(SMALL_S))
+    assert analyze_main([str(plain_run), "--no-figures", "--out", str(tmp_path / "cli")]) == 0
+    write_run(analyze_run(load_run(plain_run, ANALYZED_COLUMNS)), tmp_path / "ref", with_figures=False)
+    names = sorted(p.name for p in (tmp_path / "ref" / "tables").iterdir())
+    assert names == sorted(p.name for p in (tmp_path / "cli" / "tables").iterdir()) and "links.csv" in names
+    for name in names:
+        cli, ref = (tmp_path / kind / "tables" / name for kind in ("cli", "ref"))
+        assert cli.read_bytes() == ref.read_bytes(), name
 
 
 def _unified(run_dir):

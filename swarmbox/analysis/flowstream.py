@@ -205,6 +205,7 @@ def _joined(parts: Partitions, pieces: list[dict[str, np.ndarray]]) -> dict[str,
                  "reason": np.zeros(0, np.int64), "src": np.zeros(0, np.int64), "s_known": np.zeros(0, bool),
                  "nbytes": np.zeros(0), "type": np.zeros(0, np.int16)}
         return empty | words
-    names = [name for name in pieces[0] if not name.endswith("_words")]
-    out = {name: np.concatenate([p[name] for p in pieces]) for name in names}
+    out = {}
+    for name in [name for name in pieces[0] if not name.endswith("_words")]:
+        out[name] = np.concatenate([p.pop(name) for p in pieces])   # each window's copy freed as joined
     return out | words

@@ -89,6 +89,31 @@ def test_a_clock_step_has_the_streamed_messages_read_whole(faulty_run, monkeypat
     _equal(loaded, streamed)
 
 
+@pytest.mark.filterwarnings("ignore:invalid value encountered in cast:RuntimeWarning")   # the NaN send time
+def test_a_message_row_with_no_time_has_the_messages_read_whole(plain_run, tmp_path, monkeypatch):
+    """A row whose time is unknown cannot be put in a window (such a send takes its key's first receive
+    anywhere in the run): the streamed run reads its messages whole and gives the loaded run's tables."""
+    import shutil
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    damaged = tmp_path / "damaged"
+    shutil.copytree(plain_run, damaged)
+    path = damaged / "logs" / "drone_0" / "messages.parquet"
+    table = pq.read_table(path)
+    t_s = table.column("t_s").to_numpy(zero_copy_only=False).copy()
+    sends = np.flatnonzero(pd.Series(table.column("kind").to_pylist()) == "send")
+    mask = np.zeros(len(t_s), dtype=bool)
+    mask[sends[len(sends) // 2]] = True   # a send in mid-flight loses its time
+    column = pa.array(t_s, mask=mask)
+    pq.write_table(table.set_column(table.schema.get_field_index("t_s"), "t_s", column), path)
+    loaded = _analysis(damaged, monkeypatch, "inf")
+    streamed = _analysis(damaged, monkeypatch, str(SMALL_S), ("messages",))
+    assert streamed.run.streamed == () and loaded.flow["t_send"].isna().sum() == 1
+    _equal(loaded, streamed)
+
+
 def test_the_cli_writes_the_tables_of_the_loaded_run(plain_run, tmp_path, monkeypatch):
     """``swarmbox analyze`` streams the messages: its files, byte for byte, are those of the loaded run's
     analysis written the same way."""

@@ -18,6 +18,9 @@ ENV = "SWARMBOX_ANALYSIS_WINDOW_S"
 #: 10 s: at 1,000 drones about 1.6 M message rows (~60 MB as the windows are kept), matched with what
 #: the latency bound (2 s) reaches of the windows either side.
 DEFAULT_WINDOW_S = 10.0
+#: Rows of the doubled message flow (each message once for its sender, once for its destination) a
+#: per-agent metric groups at once: a few agents at a time beyond that.
+TOUCH_ROWS = 1 << 21
 #: Rows per Parquet batch when a table is read in pieces.
 BATCH_ROWS = 1 << 16
 

@@ -12,7 +12,7 @@ import pytest
 
 from swarmbox.analysis import diagnosis as dg
 from swarmbox.analysis import flow as fl
-from swarmbox.analysis import sampling, windows
+from swarmbox.analysis import network, sampling, windows
 from swarmbox.analysis.load import load_run
 from swarmbox.analysis.report import ANALYZED_COLUMNS, analyze_run
 from swarmbox.analysis.unify import T, unify
@@ -128,6 +128,27 @@ def test_the_cli_writes_the_tables_of_the_loaded_run(plain_run, tmp_path, monkey
     for name in names:
         cli, ref = (tmp_path / kind / "tables" / name for kind in ("cli", "ref"))
         assert cli.read_bytes() == ref.read_bytes(), name
+
+
+def test_per_agent_metrics_a_few_agents_at_a_time(plain_run, monkeypatch):
+    """The agents' and the timeline's latency and loss grouped over chunks of agents (at most 500 rows
+    of the doubled flow each: chunks of two or three agents here, each averaged as pandas averages the
+    whole) equal those grouped at once."""
+    whole = _analysis(plain_run, monkeypatch, "inf")
+    monkeypatch.setattr(windows, "TOUCH_ROWS", 500)
+    chunks = network.agent_chunks(whole.flow)
+    assert len(chunks) > 1 and all(len(c) >= 2 for c in chunks)
+    for chunk in chunks:   # no chunk falls back to the whole: its delivered rows are not in key order
+        both = network.touching(whole.flow, ["delivered"], chunk)
+        assert not network.sorted_keys(both["agent"].to_numpy()[both["delivered"].to_numpy()])
+    _equal(whole, _analysis(plain_run, monkeypatch, "inf"))
+
+
+def test_sorted_keys():
+    assert network.sorted_keys(np.array([1, 1, 2]), np.array([5, 6, 0]))
+    assert not network.sorted_keys(np.array([1, 1, 2]), np.array([6, 5, 0]))
+    assert not network.sorted_keys(np.array([2, 1]))
+    assert network.sorted_keys(np.array([3]))
 
 
 def _unified(run_dir):

@@ -17,6 +17,7 @@ receive anywhere in the run): :attr:`Partitions.timeless` says so, and the calle
 
 from __future__ import annotations
 
+import ctypes
 import math
 import tempfile
 from collections.abc import Iterator
@@ -89,10 +90,23 @@ def run_flow(run: RunData, clocks: pd.DataFrame, tick_s: float, max_latency_s: f
         return None, np.nan, np.nan
     with partition(run, clocks) as parts:
         if not parts.timeless:
-            return message_flow(parts, tick_s, max_latency_s), parts.t_min, parts.t_max
+            matched = message_flow(parts, tick_s, max_latency_s)
+            _give_back()
+            return matched, parts.t_min, parts.t_max
     read_streamed(run, "messages")
     unify_messages(run, clocks, sent_times)
     return None, np.nan, np.nan
+
+
+def _give_back() -> None:
+    """Return to the system the heap the windows' arrays were freed into. The C allocator keeps freed
+    blocks below its (growing) mapping threshold for reuse: after the windows of a 1,000-drone minute
+    that was ~300 MB the rest of the analysis never reused. A no-op where the C library has no
+    ``malloc_trim`` (not glibc)."""
+    try:
+        ctypes.CDLL(None).malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
 
 
 def _message_files(run: RunData) -> list[tuple[int, Path]]:

@@ -47,6 +47,7 @@ import numpy as np
 import pandas as pd
 
 from swarmbox.analysis import metrics, network, sampling, windows
+from swarmbox.analysis.flagruns import FlagRuns
 from swarmbox.analysis.load import GROUND, RunData
 from swarmbox.analysis.unify import T
 
@@ -164,21 +165,58 @@ def drone_series(run: RunData, opts: DiagnosisOptions | None = None,
     start, end = span or scan_span(run, opts.stage)
     ticks = np.arange(nearest_tick([start], step)[0], nearest_tick([end], step)[0] + 1)
     drones = list(run.drones)
-    disc = metrics.discrepancy(run.tables["state"])
-    disc = disc[disc["node"].isin(drones)].assign(tick=nearest_tick(disc[T], step)).rename(
-        columns={"node": "drone"})
-    values = {m: _matrix(disc, m, ticks, drones) for m in DISC}
     if flow is None:
         flow = network.message_flow(run.tables["messages"], sampling.tick_s(run), sampling.max_latency_s(run))
+    values = {m: np.full((len(ticks), len(drones)), np.nan) for m in METRICS}
+    first = _first_counted(flow, drones, step, ticks)
+    chunks = network.agent_chunks(flow, drones)
+    column = {d: i for i, d in enumerate(drones)}
+    for chunk in chunks:   # a few drones at a time: each (grid point, drone) is whole in its chunk
+        mine = drones if chunk is None else chunk
+        part = _series_part(run.tables["state"], flow, mine, ticks, opts, step, first, len(chunks) > 1)
+        if part is None:   # grouped otherwise than the whole would be (network.sorted_keys): at once
+            mine, part = drones, _series_part(run.tables["state"], flow, drones, ticks, opts, step, first)
+        at = [column[d] for d in mine]
+        for metric, mat in part.items():
+            values[metric][:, at] = mat
+        if mine is drones:
+            break
+    return Series(ticks, drones, values, step, _sparse(values[DISC[0]], step, opts))
+
+
+def _first_counted(flow: pd.DataFrame, drones: list[int], step: float, ticks: np.ndarray) -> int:
+    """The first grid point a message to or from one of ``drones`` was counted at (after the scan when
+    none was): where the trailing loss windows begin to be full."""
+    counted = flow["counted"].to_numpy(dtype=bool) & (np.isin(flow["src"].to_numpy(), drones)
+                                                      | np.isin(flow["dst"].to_numpy(), drones))
+    sent = nearest_tick(flow["t_send"].to_numpy()[counted], step)
+    return int(sent.min()) if len(sent) else int(ticks[-1]) + 1
+
+
+def _series_part(state: pd.DataFrame, flow: pd.DataFrame, drones: list[int], ticks: np.ndarray,
+                 opts: DiagnosisOptions, step: float, first: int,
+                 chunked: bool = False) -> dict[str, np.ndarray] | None:
+    """The series of ``drones`` (columns in their order); None, when ``chunked``, if a metric's rows
+    come in key order (pandas would average them otherwise than among every drone's)."""
+    mine = state if not chunked else state[state["node"].isin(drones).to_numpy()]
+    disc = metrics.discrepancy(mine)
+    disc = disc[disc["node"].isin(drones)].assign(tick=nearest_tick(disc[T], step)).rename(
+        columns={"node": "drone"})
+    if chunked and network.sorted_keys(disc["tick"].to_numpy(), disc["drone"].to_numpy()):
+        return None
+    values = {m: _matrix(disc, m, ticks, drones) for m in DISC}
+    del disc, mine
     # only the rows each metric reads, never the whole flow doubled: ~0.5 GB a copy at 1,000 drones
     got = network.touching(flow, ["t_recv", "latency_ms"], drones, flow["delivered"].to_numpy(dtype=bool))
     got["tick"] = nearest_tick(got["t_recv"], step)
+    if chunked and network.sorted_keys(got["tick"].to_numpy(), got["agent"].to_numpy()):
+        return None
     values["latency_ms"] = _matrix(got.rename(columns={"agent": "drone"}), "latency_ms", ticks, drones)
     del got
     counted = network.touching(flow, ["t_send", "counted", "lost"], drones,
                                flow["counted"].to_numpy(dtype=bool))
-    values["loss_ratio"] = _loss(counted.rename(columns={"agent": "drone"}), ticks, drones, opts, step)
-    return Series(ticks, drones, values, step, _sparse(values[DISC[0]], step, opts))
+    values["loss_ratio"] = _loss(counted.rename(columns={"agent": "drone"}), ticks, drones, opts, step, first)
+    return values
 
 
 def _sparse(disc: np.ndarray, step: float, opts: DiagnosisOptions) -> list[str]:
@@ -195,15 +233,15 @@ def _sparse(disc: np.ndarray, step: float, opts: DiagnosisOptions) -> list[str]:
 
 
 def _loss(flow: pd.DataFrame, ticks: np.ndarray, drones: list[int], opts: DiagnosisOptions,
-          step: float) -> np.ndarray:
+          step: float, first: int) -> np.ndarray:
     """Trailing-window loss ratio per grid point: cumulative sums of lost and counted by send point. A
     window is only full once the run has sent messages for its whole length: before that (the
-    first seconds of a run) the ratio of a few dozen messages is noise, and is left out."""
+    first seconds of a run) the ratio of a few dozen messages is noise, and is left out (``first``: the
+    grid point of the first counted message of any drone)."""
     width = max(1, int(round(opts.loss_window_s / step)))
     lo = ticks[0] - width
     grid = np.arange(lo, ticks[-1] + 1)
     counted = flow[flow["counted"]].assign(tick=lambda f: nearest_tick(f["t_send"], step))
-    first = int(counted["tick"].min()) if len(counted) else int(ticks[-1]) + 1
     counted = counted[(counted["tick"] >= lo) & (counted["tick"] <= ticks[-1])]
     n = np.nan_to_num(_matrix(counted.assign(one=1.0), "one", grid, drones, "sum"))
     lost = counted.assign(lost_f=counted["lost"].astype("float64"))
@@ -276,7 +314,8 @@ def scan(series: Series, opts: DiagnosisOptions | None = None, chunk: int | None
 
     The grid is scanned ``chunk`` points at a time (default: one analysis window,
     :mod:`~swarmbox.analysis.windows`): the fences are per grid point, so only the chunk's sorted copy
-    is held, and a flag run that crosses a chunk's edge carries on into the next (:class:`_Runs`)."""
+    is held, and a flag run that crosses a chunk's edge carries on into the next
+    (:class:`~.flagruns.FlagRuns`)."""
     opts = opts or DiagnosisOptions()
     chunk = chunk if chunk is not None else windows.points(series.step_s)
     if chunk < 1:
@@ -286,7 +325,7 @@ def scan(series: Series, opts: DiagnosisOptions | None = None, chunk: int | None
         mat = series.values.get(metric)
         if mat is None:
             continue
-        runs = _Runs(len(series.drones), opts.persist_points(series.step_s))
+        runs = FlagRuns(len(series.drones), opts.persist_points(series.step_s))
         for lo in range(0, len(mat), chunk):
             part = mat[lo:lo + chunk]
             score, med, iqr = outlier_matrix(part, opts.threshold(metric), opts.rule, opts.min_n)
@@ -297,51 +336,6 @@ def scan(series: Series, opts: DiagnosisOptions | None = None, chunk: int | None
                          "drone": int(series.drones[j]), "value": value, "score": sc, "median": median,
                          "iqr": spread, "end_u": series.ticks[last] * series.step_s})
     return _ordered(pd.DataFrame(rows, columns=ALARM_COLUMNS))
-
-
-class _Runs:
-    """Runs of consecutive flags per column, fed chunk by chunk of rows: a run still open at a chunk's
-    end goes on in the next. A run of at least ``persist`` rows is an episode whose alarm is its
-    ``persist``-th row; what that row showed (value, score, median, IQR) is kept while its chunk is at
-    hand."""
-
-    def __init__(self, columns: int, persist: int) -> None:
-        self.persist = persist
-        self.start = np.full(columns, -1, dtype=np.int64)   # row where the open run began, -1: none
-        self.seen: dict[int, tuple] = {}                     # column -> its open run's alarm row values
-        self.done: list[tuple[int, int, int, tuple]] = []    # column, alarm row, last row, values
-
-    def feed(self, lo: int, flags: np.ndarray, shown: tuple[np.ndarray, ...]) -> None:
-        """Rows ``lo``.. of every column (``flags``: rows x columns); ``shown``: the chunk's values and
-        scores (rows x columns) and medians and IQRs (rows)."""
-        active = np.flatnonzero(flags.any(axis=0) | (self.start >= 0))
-        for j in active.tolist():
-            edges = np.diff(np.concatenate([[self.start[j] >= 0], flags[:, j]]).astype("int8"))
-            starts = (lo + np.flatnonzero(edges == 1)).tolist()
-            stops = (lo + np.flatnonzero(edges == -1)).tolist()
-            if self.start[j] >= 0:
-                starts.insert(0, int(self.start[j]))
-            for k, a in enumerate(starts):
-                alarm = a + self.persist - 1
-                if lo <= alarm < lo + len(flags) and (k >= len(stops) or stops[k] > alarm):
-                    i = alarm - lo   # the run reaches its persistence in this chunk
-                    value, score, med, iqr = shown
-                    self.seen[j] = (float(value[i, j]), float(score[i, j]), float(med[i]), float(iqr[i]))
-                if k < len(stops):
-                    self._end(j, a, stops[k])
-            self.start[j] = starts[-1] if len(starts) > len(stops) else -1
-
-    def _end(self, j: int, a: int, stop: int) -> None:
-        if stop - a >= self.persist:
-            self.done.append((j, a + self.persist - 1, stop - 1, self.seen.pop(j)))
-        self.seen.pop(j, None)
-
-    def close(self, rows: int) -> list[tuple[int, int, int, tuple]]:
-        """Every episode, the runs still open ending at ``rows``."""
-        for j in np.flatnonzero(self.start >= 0).tolist():
-            self._end(j, int(self.start[j]), rows)
-        self.start[:] = -1
-        return self.done
 
 
 def _ordered(alarms: pd.DataFrame) -> pd.DataFrame:

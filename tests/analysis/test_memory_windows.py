@@ -131,9 +131,9 @@ def test_the_cli_writes_the_tables_of_the_loaded_run(plain_run, tmp_path, monkey
 
 
 def test_per_agent_metrics_a_few_agents_at_a_time(plain_run, monkeypatch):
-    """The agents' and the timeline's latency and loss grouped over chunks of agents (at most 500 rows
-    of the doubled flow each: chunks of two or three agents here, each averaged as pandas averages the
-    whole) equal those grouped at once."""
+    """The agents', the timeline's and the diagnosis' latency and loss grouped over chunks of agents
+    (at most 500 rows of the doubled flow each: chunks of two or three agents here, each averaged as
+    pandas averages the whole) equal those grouped at once."""
     whole = _analysis(plain_run, monkeypatch, "inf")
     monkeypatch.setattr(windows, "TOUCH_ROWS", 500)
     chunks = network.agent_chunks(whole.flow)
@@ -141,6 +141,11 @@ def test_per_agent_metrics_a_few_agents_at_a_time(plain_run, monkeypatch):
     for chunk in chunks:   # no chunk falls back to the whole: its delivered rows are not in key order
         both = network.touching(whole.flow, ["delivered"], chunk)
         assert not network.sorted_keys(both["agent"].to_numpy()[both["delivered"].to_numpy()])
+    drones = network.agent_chunks(whole.flow, whole.run.drones)   # the timeline's and the diagnosis'
+    assert len(drones) > 1
+    for chunk in drones:
+        got = network.touching(whole.flow, ["t_recv"], chunk, whole.flow["delivered"].to_numpy(dtype=bool))
+        assert not network.sorted_keys(dg.nearest_tick(got["t_recv"], 0.025), got["agent"].to_numpy())
     _equal(whole, _analysis(plain_run, monkeypatch, "inf"))
 
 

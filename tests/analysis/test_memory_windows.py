@@ -12,7 +12,7 @@ import pytest
 
 from swarmbox.analysis import diagnosis as dg
 from swarmbox.analysis import flow as fl
-from swarmbox.analysis import network, sampling, windows
+from swarmbox.analysis import metrics, network, sampling, windows
 from swarmbox.analysis.load import load_run
 from swarmbox.analysis.report import ANALYZED_COLUMNS, analyze_run
 from swarmbox.analysis.unify import T, unify
@@ -147,6 +147,15 @@ def test_per_agent_metrics_a_few_agents_at_a_time(plain_run, monkeypatch):
         got = network.touching(whole.flow, ["t_recv"], chunk, whole.flow["delivered"].to_numpy(dtype=bool))
         assert not network.sorted_keys(dg.nearest_tick(got["t_recv"], 0.025), got["agent"].to_numpy())
     _equal(whole, _analysis(plain_run, monkeypatch, "inf"))
+
+
+@pytest.mark.parametrize("block", [1, 7, 256])
+def test_swarm_order_by_blocks_of_ticks(plain_run, block):
+    run = _unified(plain_run)
+    whole = metrics.order_by_tick(run.tables["state"], run.drones, block=10**9)
+    got = metrics.order_by_tick(run.tables["state"], run.drones, block=block)
+    pd.testing.assert_series_equal(whole, got, check_exact=True)
+    assert whole.notna().sum() > 100
 
 
 def test_sorted_keys():

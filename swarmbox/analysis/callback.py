@@ -76,3 +76,23 @@ class AnalyzeSweepCallback(Callback):
             log.info("sweep analysis of %d runs written under %s", len(result.runs), sweep_dir)
         except Exception:  # noqa: BLE001 - an analysis failure must not fail the multirun
             log.exception("sweep analysis failed")
+
+
+class DiagnoseSweepCallback(Callback):
+    """Hydra callback: the diagnosis report of a multirun, in ``<sweep>/diagnosis/``
+    (``swarmbox detect <sweep>``).
+
+    ``group_by`` is accepted and ignored, so that it can take the place of the generic ``analyze``
+    callback. It never raises: a failure is logged.
+    """
+
+    def __init__(self, jobs: int = 2, group_by: Sequence[str] = ()) -> None:
+        self.jobs = jobs
+
+    def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
+        try:
+            from swarmbox.analysis.detection import main
+
+            main([str(config.hydra.sweep.dir), "--jobs", str(self.jobs)])
+        except Exception:  # noqa: BLE001 - an analysis failure must not fail the multirun
+            log.exception("diagnosis of the sweep failed")

@@ -314,30 +314,5 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _hydra_callback_base() -> type:
-    from hydra.experimental.callback import Callback
-
-    return Callback
-
-
-class DiagnoseSweepCallback(_hydra_callback_base()):
-    """Hydra callback: the diagnosis report of a multirun, in ``<sweep>/diagnosis/``.
-
-    ``group_by`` is accepted and ignored, so that it can take the place of the generic ``analyze``
-    callback. It never raises: a failure is logged.
-    """
-
-    def __init__(self, jobs: int = 2, group_by: Sequence[str] = ()) -> None:
-        self.jobs = jobs
-
-    def on_multirun_end(self, config, **kwargs) -> None:
-        try:
-            main([str(config.hydra.sweep.dir), "--jobs", str(self.jobs)])
-        except Exception:  # noqa: BLE001 - an analysis failure must not fail the multirun
-            import logging
-
-            logging.getLogger(__name__).exception("diagnosis of the sweep failed")
-
-
 if __name__ == "__main__":
     raise SystemExit(main())

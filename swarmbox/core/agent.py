@@ -26,6 +26,7 @@ from swarmbox.api.views import read_only, read_only_mission
 from swarmbox.core.delivery import DELIVERED, NEW, Window
 from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck, TaskCommand
 from swarmbox.core.node import STAGE_OF, Node, call_hook, hook_error
+from swarmbox.core.ports import Vehicle
 from swarmbox.core.rows import NO_TEXT, TEXTS, pack_setpoint
 from swarmbox.core.stages import TERMINAL, Stage, path_to
 
@@ -48,7 +49,8 @@ _OK_CODE = TEXTS.code("ok")
 
 
 class AgentNode(Node):
-    def __init__(self, node_id: int, *, superior: int, algorithm: DroneAlgorithm, vehicle, **kw) -> None:
+    def __init__(self, node_id: int, *, superior: int, algorithm: DroneAlgorithm, vehicle: Vehicle,
+                 **kw) -> None:
         super().__init__(node_id, **kw)
         # its own frozen copies: a hook that writes them fails, and no other node sees a change
         self.params, self.mission = read_only(self.params), read_only_mission(self.mission)

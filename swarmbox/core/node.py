@@ -17,6 +17,7 @@ from swarmbox.api.types import DescendantState, InferiorReport, MissionInfo, Sta
 from swarmbox.core.clock import NodeClock, TimeSource
 from swarmbox.core.delivery import Outbox
 from swarmbox.core.messages import NO_SUBJECT, Report, TaskAck, TaskCommand, make_msg_id
+from swarmbox.core.ports import Transport
 from swarmbox.core.stages import check_transition
 
 Row = tuple
@@ -26,16 +27,6 @@ STAGE_OF = {int(s): s for s in Stage}
 #: InferiorReport(*fields) without the Python-level NamedTuple constructor (one per Report received).
 new_inferior_report = partial(tuple.__new__, InferiorReport)
 _new_descendant = partial(tuple.__new__, DescendantState)
-
-
-class Transport(Protocol):
-    """What a node needs from the network."""
-
-    def send(self, msg: Any, dst: int) -> None: ...
-    def publish(self, msg: Any) -> None: ...
-    def subscribe(self, subscriber: int, publisher: int) -> None: ...
-    def unsubscribe(self, subscriber: int, publisher: int) -> None: ...
-    def has_subscribers(self, publisher: int) -> bool: ...
 
 
 class NodeLog(Protocol):

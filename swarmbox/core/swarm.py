@@ -23,6 +23,7 @@ from swarmbox.core.agent import AgentNode
 from swarmbox.core.clock import TimeSource
 from swarmbox.core.ending import EndWatch, outcome
 from swarmbox.core.ground import GroundNode
+from swarmbox.core.ports import Backend, Network
 
 
 @contextmanager
@@ -62,7 +63,7 @@ class Swarm:
     """Owns the nodes, the network, the backend and the clock of one run."""
 
     def __init__(self, *, time: TimeSource, tick_s: float, ground: GroundNode, agents: list[AgentNode],
-                 medium, backend, event_logs: dict[int, Callable]) -> None:
+                 medium: Network, backend: Backend, event_logs: dict[int, Callable]) -> None:
         self.time, self.tick_s = time, tick_s
         self.ground, self.agents = ground, agents
         self.medium, self.backend = medium, backend

@@ -20,8 +20,8 @@ from typing import Any, Optional
 
 from omegaconf import MISSING
 
-from swarmbox.hal.mavsim.backend import MavsimOptions
-from swarmbox.hal.px4.backend import Px4Params
+from swarmbox.hal.mavsim.options import MavsimOptions
+from swarmbox.hal.px4.params import Px4Params
 from swarmbox.hal.px4.sitl import SitlOptions
 from swarmbox.hal.sim.params import SimParams
 

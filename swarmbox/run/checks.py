@@ -20,8 +20,8 @@ from omegaconf import DictConfig, OmegaConf
 from swarmbox.api import DroneAlgorithm, GroundAlgorithm
 from swarmbox.core.topology import TopologyError
 from swarmbox.faults import FaultConfigError, FaultEnv, build_faults
-from swarmbox.hal.mavsim.backend import MavsimOptions
-from swarmbox.hal.px4.backend import Px4Params
+from swarmbox.hal.mavsim.options import MavsimOptions
+from swarmbox.hal.px4.params import Px4Params
 from swarmbox.hal.px4.sitl import SitlOptions
 from swarmbox.hal.sim.params import SimParams
 from swarmbox.run import build, mission

@@ -69,7 +69,7 @@ def autopilots(cfg: DictConfig, m: Any, run_dir: Path) -> tuple[Any, dict[str, d
     if b.get("name") != "px4" or not b.get("px4_build"):
         return None, {}
     from swarmbox.hal.mavlink.frames import GeoFrame
-    from swarmbox.hal.px4.backend import Px4Params
+    from swarmbox.hal.px4.params import Px4Params
     from swarmbox.hal.px4.sitl import SitlLauncher, connection_of
     from swarmbox.hal.safety import SafetyLimits
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import pytest
 
 from swarmbox.hal.mavlink import codec as mc
-from swarmbox.hal.px4.vehicle import WANTED
+from swarmbox.hal.px4.streams import WANTED
 
 #: message -> Hz in one second of a PX4 SITL instance's API stream (defaults, before silencing)
 STREAM_HZ = {"HEARTBEAT": 1, "LOCAL_POSITION_NED": 30, "GLOBAL_POSITION_INT": 10, "GPS_RAW_INT": 10,

@@ -19,7 +19,7 @@ from swarmbox.hal.mavlink.link import VehicleLink
 from swarmbox.hal.mavlink.signing import signing_key_of, signing_timestamp
 from swarmbox.hal.px4.backend import Px4Backend
 from swarmbox.hal.px4.params import Px4Params
-from swarmbox.hal.px4.vehicle import WANTED
+from swarmbox.hal.px4.streams import WANTED
 
 ROOT = Path(__file__).resolve().parents[2]
 KEY = signing_key_of("swarmbox test key")

@@ -16,7 +16,6 @@ import subprocess
 import sys
 import tempfile
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +24,7 @@ import numpy as np
 from swarmbox.hal.launch import ProcessSet, without_keys
 from swarmbox.hal.mavlink.frames import GeoFrame
 from swarmbox.hal.mavlink.signing import KEY_ENV
+from swarmbox.hal.mavsim.options import MavsimOptions
 from swarmbox.hal.px4.backend import BootClock, Px4Backend
 from swarmbox.hal.safety import SafetyLimits
 from swarmbox.hal.sim.params import SimParams
@@ -32,16 +32,6 @@ from swarmbox.hal.sim.params import SimParams
 Vec3 = tuple[float, float, float]
 _PACKAGE_ROOT = Path(__file__).resolve().parents[3]
 STOP_TIMEOUT_S = 5.0
-
-
-@dataclass(frozen=True, slots=True)
-class MavsimOptions:
-    """How the vehicle processes run (keys of ``conf/backend/mavsim.yaml`` beyond the bridge's)."""
-
-    vehicle_tick_s: float = 0.01        # physics step of each vehicle (simulation s)
-    offboard_loss: str = "hold"         # failsafe when setpoints stop in OFFBOARD: hold | land | rtl
-    sim: Mapping[str, float | bool | str] | None = None   # sim backend parameters for the vehicles
-    refuse: Mapping[str, tuple[str, ...]] | None = None   # drone_<i> -> commands it denies (faults)
 
 
 def proc_stats(pid: int) -> dict[str, float]:

@@ -33,7 +33,8 @@ from swarmbox.hal.mavlink.frames import GeoFrame, VehicleFrame
 from swarmbox.hal.mavlink.link import VehicleLink, parse_connection
 from swarmbox.hal.px4.params import BootClock, Px4Params, boot_clock_fit
 from swarmbox.hal.px4.sitl import ENV_BUILD, SHARED_BUILDS, SitlLauncher, resolve_build
-from swarmbox.hal.px4.vehicle import WANTED, Px4Vehicle
+from swarmbox.hal.px4.streams import WANTED
+from swarmbox.hal.px4.vehicle import Px4Vehicle
 from swarmbox.hal.safety import SafetyLimits
 from swarmbox.hal.vehicle import VehicleEvent
 

@@ -15,7 +15,6 @@ from typing import Any
 
 import numpy as np
 
-from swarmbox.hal.mavlink.codec import MSG
 from swarmbox.hal.mavlink.frames import GeoFrame
 from swarmbox.hal.mavlink.signing import signing_key_of
 
@@ -103,6 +102,10 @@ class Px4Params:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"px4 backend parameter {name!r} must be finite and > 0, got {value!r}")
+        # imported here: the message table loads pymavlink's dialect, which a run on another backend,
+        # checking its config against this schema, never needs
+        from swarmbox.hal.mavlink.codec import MSG
+
         unknown = [m for m in self.message_rates_hz if m not in MSG]
         if unknown:
             raise ValueError(f"px4 backend: message_rates_hz names unknown MAVLink messages {unknown}")

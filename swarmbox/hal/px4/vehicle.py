@@ -38,7 +38,6 @@ from swarmbox.hal.mavlink.codec import (
     MODE_OFFBOARD,
     MODE_RTL,
     MODE_TAKEOFF,
-    MSG,
     CommandAckMsg,
     GcsEncoder,
     GlobalPositionMsg,
@@ -61,6 +60,7 @@ from swarmbox.hal.mavlink.paramset import ParamSetter
 from swarmbox.hal.mavlink.statustext import StatusTexts
 from swarmbox.hal.px4.linkreport import LinkReport
 from swarmbox.hal.px4.params import LinkConfig
+from swarmbox.hal.px4.streams import Streams
 from swarmbox.hal.safety import HeldSetpoint, SafetyLimits, check_setpoint, safety_event
 
 Vec3 = tuple[float, float, float]
@@ -69,11 +69,7 @@ Emit = Callable[[str, str, dict[str, Any]], None]
 _NAN = math.nan
 _ZERO3 = (0.0, 0.0, 0.0)
 STATE_GRACE_S = 0.3           # a HEARTBEAT this soon after an accepted command may predate it
-SILENCE_AFTER = 20            # unrequested packets of one id before asking PX4 to stop them
 _NOT_CRITICAL = frozenset((CMD_SET_MESSAGE_INTERVAL, CMD_REQUEST_MESSAGE, CMD_INJECT_FAILURE))
-WANTED = frozenset(MSG[m] for m in (
-    "HEARTBEAT", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "GPS_RAW_INT", "SYS_STATUS",
-    "EXTENDED_SYS_STATE", "COMMAND_ACK", "STATUSTEXT", "HIL_STATE_QUATERNION", "PARAM_VALUE"))
 
 
 class Px4Vehicle:
@@ -113,7 +109,7 @@ class Px4Vehicle:
         self._stream_since_s: float | None = None
         self._blocked = ""                         # why setpoints are not followed (autopilot's choice)
         self._noted: set[tuple[str, str]] = set()
-        self._silenced: dict[int, tuple[int, float, int]] = {}   # msg id -> (tries, at_s, count then)
+        self._streams = Streams(cfg, link.decoder, self._submit)
         self._checks_s, self._odd_acks = 0.0, set()
         self._texts = StatusTexts(self._emit)
         self._link_report = LinkReport(link, emit, cfg.stats_every_s)
@@ -236,7 +232,7 @@ class Px4Vehicle:
         if now_s - self._checks_s >= 1.0:
             self._checks_s = now_s
             self._texts.service(now_s)
-            self._silence_unrequested()
+            self._streams.silence_unrequested(now_s)
             self._link_report(now_s, connected=True)
 
     def _stream(self) -> None:
@@ -260,11 +256,11 @@ class Px4Vehicle:
         if not self.connected:
             self.connected = True
             self._emit("link", "connected", {"system_id": self.system_id, "mode": mode_name(hb.custom_mode)})
-            self._configure_rates()
+            self._streams.configure()
         elif self.link_lost:
             self.link_lost = False
             self._emit("link", "regained", {"silent_s": round(self._now - self._hb_s, 3)})
-            self._configure_rates()
+            self._streams.configure()
             if self._on_regain is not None:   # e.g. the failsafe's return-to-launch: send it now
                 cmd, self._on_regain = self._on_regain, None
                 self._submit(cmd.command, cmd.params, cmd.on_accepted)
@@ -397,20 +393,3 @@ class Px4Vehicle:
         self.link_lost, self._tel = True, None
         self._emit("link", "lost", {"silent_s": round(self._now - self._hb_s, 3),
                                     "mode": mode_name(self._mode), "armed": self._armed})
-
-    def _configure_rates(self) -> None:
-        for name, hz in self._cfg.message_rates_hz:
-            interval_us = 1e6 / hz if hz > 0 else -1.0
-            self._submit(CMD_SET_MESSAGE_INTERVAL, (float(MSG[name]), interval_us))
-
-    def _silence_unrequested(self) -> None:
-        """Ask the autopilot to stop streams nobody asked for (each costs parsing time)."""
-        if not self._cfg.silence_unrequested:
-            return
-        for msg_id, count in self._link.decoder.skipped_ids.items():
-            if count < SILENCE_AFTER:
-                continue
-            tries, at_s, then = self._silenced.get(msg_id, (0, -math.inf, 0))
-            if tries < 3 and self._now - at_s >= 5.0 and count - then >= SILENCE_AFTER:
-                self._silenced[msg_id] = (tries + 1, self._now, count)
-                self._submit(CMD_SET_MESSAGE_INTERVAL, (float(msg_id), -1.0), quiet=True)

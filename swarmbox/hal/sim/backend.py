@@ -15,9 +15,6 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Mapping, Sequence
-from functools import partial
-from itertools import repeat
-from operator import attrgetter
 from types import ModuleType
 from typing import Any
 
@@ -28,6 +25,7 @@ from swarmbox.hal.safety import SafetyLimits, reach_m
 from swarmbox.hal.sim import kernel
 from swarmbox.hal.sim.control import CascadedController
 from swarmbox.hal.sim.params import SimParams
+from swarmbox.hal.sim.readout import FleetReadout
 from swarmbox.hal.sim.sensors import GnssEstimator
 from swarmbox.hal.sim.vehicle import SimVehicle
 from swarmbox.hal.sim.world import PlaneWorld, ned_xy
@@ -36,8 +34,6 @@ from swarmbox.hal.vehicle import VehicleEvent
 __all__ = ["SimBackend", "SimParams", "SimVehicle"]
 
 log = logging.getLogger(__name__)
-_new_telemetry = partial(tuple.__new__, Telemetry)   # Telemetry(*fields), all 13 given
-_ARMED, _MODE = attrgetter("armed"), attrgetter("mode")
 
 
 def _load_kernel(mode: str) -> ModuleType | None:
@@ -107,12 +103,7 @@ class SimBackend:
         self._world.read(self._pos, self._vel)
         self._dt_s, self._substeps, self._t0_s, self._k = -1.0, 1, 0.0, 0
         self._vert_k = (np.zeros(()), np.zeros(()))
-        self._tel: list[Telemetry] | None = None   # every vehicle's, built once per step on demand
         self._battery, self._battery_ok = np.zeros(n), False   # battery fractions, once per step
-        self._n_fixes = 0                                         # GNSS fixes taken (the cache key)
-        self._fix_key: tuple = ()                                 # ... of the lists below
-        self._fix_lists: tuple[list, list, list] = ([], [], [])   # fix tuples, seq, ready: change
-        #                                                           only with a fix, a crash, est_init_s
         # the compiled per-step kernel (kernel.py): the same numbers as the numpy code, faster
         self._kernel = (_load_kernel(p.jit) if p.jit == "always" else kernel.loaded() if p.jit == "auto"
                         else None)
@@ -123,8 +114,12 @@ class SimBackend:
         self._watched: set[int] = set()   # vehicles flying a velocity/acceleration in OFFBOARD
         self._watch_order: np.ndarray | None = None
         self._closed = False
+        self._readout = FleetReadout(kin=self._kin, yaw_rad=self.ctrl.yaw_rad, airborne=self.airborne,
+                                     gnss=self._gnss, crashed=self._crashed, crash_seen=self._crash_seen,
+                                     est_init_s=p.est_init_s, battery=self.battery_frac)
         self.vehicles = [SimVehicle(self, i, (h[0], h[1], h[2]), ctrl=self.ctrl, params=p, limits=limits)
                          for i, h in enumerate(homes.tolist())]
+        self._readout.vehicles = self.vehicles
         if self._kernel is not None:
             self._warm(self._kernel)
 
@@ -213,7 +208,7 @@ class SimBackend:
         self._event_t_s = t_next = self._t0_s + self._k * dt_s   # no round-off creep over long runs
         w.step(dt_s, self._substeps)
         w.read(self._pos, self._vel)
-        self.t_s = t_next
+        self.t_s = self._readout.t_s = t_next
         g = self._gnss
         if g.due(self.t_s):
             self._gnss_fix(jit)
@@ -225,7 +220,8 @@ class SimBackend:
             self._air_s += self._tmp
         if self._supervised:
             self._supervise()
-        self._tel, self._battery_ok = None, jit is not None
+        self._readout.step_done()
+        self._battery_ok = jit is not None
         if self._watched:
             self._judge_held()
 
@@ -309,7 +305,7 @@ class SimBackend:
         return bool(self.airborne[i] == 0.0)
 
     def _gnss_fix(self, jit: ModuleType | None) -> None:
-        self._n_fixes += 1
+        self._readout.n_fixes += 1
         for i, count, jump_m in self._gnss.fix(self.t_s, self._pos, jit):
             self.emit(i, "estimator", "position_reset", {"count": count, "jump_m": jump_m})
 
@@ -363,54 +359,13 @@ class SimBackend:
         return ""
 
     def estimate_ned(self, i: int) -> tuple[float, float, float]:
-        """Vehicle ``i``'s estimated position (n, e, d): this step's telemetry has it, once built."""
-        if self._tel is not None:
-            return self._tel[i].pos_ned_m
-        n, e, d = self._est[:, i].tolist()
-        return (n, e, d)
+        """Vehicle ``i``'s estimated position (n, e, d)."""
+        return self._readout.estimate_ned(i)
 
     def speed_m_s(self, i: int) -> float:
         """Vehicle ``i``'s true 3-D speed."""
         n, e, d = self._vel[:, i].tolist()
         return math.sqrt(n * n + e * e + d * d)
-
-    def telemetry_of(self, i: int) -> Telemetry:
-        """Vehicle ``i``'s telemetry. The whole fleet's is built once per step, on first demand; a
-        vehicle's armed flag and mode are its own and may change within the step (then re-read)."""
-        tel = (self._tel or self._build_telemetry())[i]
-        v = self.vehicles[i]
-        if tel.armed is not v.armed or tel.mode is not v.mode:
-            tel = self._tel[i] = tel._replace(armed=v.armed, mode=v.mode)   # type: ignore[index]
-        return tel
-
-    def _build_telemetry(self) -> list[Telemetry]:
-        """Every vehicle's telemetry from the fleet arrays in one pass: the vectors are made by
-        ``zip`` and the records by ``tuple.__new__``, both in C (a NamedTuple's own constructor
-        is Python code). The GNSS fields and the ready flags change only with a fix, a crash or
-        the end of the estimator's start-up, so they are rebuilt only then."""
-        t, vehicles, n = self.t_s, self.vehicles, self.n
-        fixes, seq, ready = self._gnss_lists(t)
-        en, ee, ed, vn, ve, vd, pn, pe, pd = self._kin.tolist()
-        self._tel = list(map(_new_telemetry, zip(
-            repeat(t, n), zip(en, ee, ed, strict=True), zip(vn, ve, vd, strict=True),
-            self.ctrl.yaw_rad.tolist(), fixes, seq, list(map(_ARMED, vehicles)),
-            (self.airborne == 0.0).tolist(), list(map(_MODE, vehicles)), self.battery_frac().tolist(),
-            ready, zip(pn, pe, pd, strict=True), repeat(True, n),
-            strict=False)))   # the repeats are as long as the fleet
-        return self._tel
-
-    def _gnss_lists(self, t_s: float) -> tuple[list, list, list]:
-        """Per vehicle: latest fix (None before the first), fix count, ready flag — cached."""
-        g = self._gnss
-        key = (self._n_fixes, t_s >= self.params.est_init_s, int(np.count_nonzero(self._crashed)))
-        if key != self._fix_key:
-            seq = g.seq.tolist()
-            fixes = list(zip(*g.fix_ned_m.tolist(), strict=True))
-            if not all(seq):
-                fixes = [f if s else None for f, s in zip(fixes, seq, strict=True)]
-            self._fix_lists = (fixes, seq, (g.ready(t_s) & ~self._crashed).tolist())
-            self._fix_key = key
-        return self._fix_lists
 
     def battery_frac(self) -> np.ndarray:
         """Every vehicle's battery fraction now (computed once per step; do not modify)."""
@@ -422,7 +377,11 @@ class SimBackend:
             self._battery_ok = True
         return self._battery
 
-    # ---- fleet state export (the recorder's columnar state rows) --------------------------------
+    # ---- what the fleet reports (swarmbox.hal.sim.readout) ------------------------------------------
+    def telemetry_of(self, i: int) -> Telemetry:
+        """Vehicle ``i``'s telemetry (the whole fleet's is built once per step, on first demand)."""
+        return self._readout.telemetry_of(i)
+
     def state_columns(self, index: np.ndarray | None = None) -> list[np.ndarray]:
         """The numeric columns of the ``state`` log rows of vehicles ``index`` (None: all, in order),
         as telemetry reports them now: estimated position and velocity, latest GNSS fix (NaN before
@@ -434,25 +393,5 @@ class SimBackend:
         return [*values, landed]
 
     def state_into(self, values: np.ndarray, landed: np.ndarray, index: np.ndarray | None = None) -> None:
-        """Write the ``state`` columns of vehicles ``index`` (None: all, in order) into ``values``
-        (14, n) — position, velocity, GNSS fix, true position (each n, e, d), yaw, battery — and
-        ``landed`` (n,), in a few numpy calls; a crashed vehicle's values are its frozen telemetry's."""
-        g = self._gnss
-        if index is None:
-            np.concatenate((self._est, self._vel, g.fix_ned_m, self._pos), out=values[:12])
-            np.copyto(values[12], self.ctrl.yaw_rad)
-            np.copyto(values[13], self.battery_frac())
-            np.equal(self.airborne, 0.0, landed)
-        else:
-            values[:12] = np.concatenate((self._est, self._vel, g.fix_ned_m, self._pos))[:, index]
-            values[12], values[13] = self.ctrl.yaw_rad[index], self.battery_frac()[index]
-            landed[:] = self.airborne[index] == 0.0
-        if self._n_crashed:
-            crashed = self._crash_seen if index is None else self._crash_seen[index]
-            for j in np.flatnonzero(crashed).tolist():
-                tel = self.vehicles[j if index is None else int(index[j])].frozen
-                if tel is not None:
-                    fix = tel.gnss_ned_m or (math.nan,) * 3
-                    values[:, j] = (*tel.pos_ned_m, *tel.vel_ned_m_s, *fix, *tel.true_pos_ned_m, tel.yaw_rad,
-                                    tel.battery_frac)
-                    landed[j] = tel.landed
+        """The ``state`` columns written into the recorder's buffers (:meth:`FleetReadout.state_into`)."""
+        self._readout.state_into(values, landed, index)

@@ -69,9 +69,11 @@ def test_no_context_exposes_ground_truth_or_wire_messages():
 def test_a_sim_run_loads_no_mavlink_and_the_analysis_commands_load_no_hydra():
     """What a process actually loads: a sim run's modules (build, checks, runner) without pymavlink,
     which only the MAVLink backends need; ``swarmbox detect`` and ``analyze`` without Hydra."""
-    code = ("import sys, swarmbox.run.build, swarmbox.run.checks, swarmbox.run.runner, swarmbox.run.backend_schema;"
+    code = ("import sys, swarmbox.run.build, swarmbox.run.checks, swarmbox.run.runner,"
+            " swarmbox.run.backend_schema;"
             "bad = sorted(m for m in sys.modules if m.split('.')[0] == 'pymavlink'"
-            " or m in ('swarmbox.hal.px4.backend', 'swarmbox.hal.mavsim.backend', 'swarmbox.hal.mavlink.codec'));"
+            " or m in ('swarmbox.hal.px4.backend', 'swarmbox.hal.mavsim.backend',"
+            " 'swarmbox.hal.mavlink.codec'));"
             "print(bad); sys.exit(1 if bad else 0)")
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr

@@ -6,7 +6,7 @@ import inspect
 import pytest
 from hydra.utils import instantiate
 
-from swarmbox.api import DroneAlgorithm, GroundAlgorithm
+from swarmbox.api import DroneAlgorithm, FleetAlgorithm, GroundAlgorithm
 from tests.conftest import CONF, ROOT, compose_config
 
 ALGO_CONFIGS = sorted(p.stem for p in (CONF / "algo").glob("*.yaml") if not p.stem.endswith("_base"))
@@ -16,7 +16,7 @@ ALGO_CONFIGS = sorted(p.stem for p in (CONF / "algo").glob("*.yaml") if not p.st
 def test_every_algo_config_composes_and_instantiates(name):
     cfg, _ = compose_config([f"algo={name}"])
     drone = instantiate(cfg.algo.drone)
-    assert isinstance(drone, DroneAlgorithm)
+    assert isinstance(drone, DroneAlgorithm | FleetAlgorithm)
     if cfg.algo.ground is not None:
         assert isinstance(instantiate(cfg.algo.ground), GroundAlgorithm)
 
@@ -27,7 +27,8 @@ def _algorithm_classes():
             continue
         module = importlib.import_module(f"swarmbox.algorithms.{path.stem}")
         for _, cls in inspect.getmembers(module, inspect.isclass):
-            if cls.__module__ == module.__name__ and issubclass(cls, DroneAlgorithm | GroundAlgorithm):
+            roles = DroneAlgorithm | FleetAlgorithm | GroundAlgorithm
+            if cls.__module__ == module.__name__ and issubclass(cls, roles):
                 yield f"{cls.__module__}.{cls.__qualname__}"
 
 

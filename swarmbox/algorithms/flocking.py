@@ -30,6 +30,9 @@ Differences from the reference port: the wall term uses the published sign ``(v_
 shill velocity pointing into the arena (the reference pointed it outward and used ``v_i − v_s``) and
 has the gain ``C_shill``; a drone at rest self-propels along its initial heading (the reference's
 fallback never fired); neighbours are limited to ``r_comm_m``; velocities are horizontal.
+
+The drone side comes twice: :class:`FlockingDrone` per drone, :class:`FlockingFleet` over the whole
+fleet at once (the batch API, ``algo=flocking_batch``).
 """
 
 import math
@@ -40,7 +43,19 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from swarmbox.api import DroneAlgorithm, DroneContext, GroundAlgorithm, GroundContext, Setpoint, Task
+from swarmbox.api import (
+    DroneAlgorithm,
+    DroneContext,
+    Fleet,
+    FleetAlgorithm,
+    FleetSetpoints,
+    GroundAlgorithm,
+    GroundContext,
+    Setpoint,
+    SetpointKind,
+    Task,
+    row_norms,
+)
 
 TAKEOFF, FLOCK, BRAKE = 0, 1, 2
 
@@ -222,3 +237,47 @@ class FlockingDrone(DroneAlgorithm):
     def exec_complete(self, ctx: DroneContext) -> bool:
         task = ctx.last_task
         return task is not None and task.code == BRAKE and math.hypot(*ctx.vel_ned_m_s[:2]) < 0.3
+
+
+class FlockingFleet(FleetAlgorithm):
+    """:class:`FlockingDrone` over the whole fleet at once (``algo=flocking_batch``): the same logs."""
+
+    Params = FlockingParams
+
+    def setup(self, fleet: Fleet) -> None:
+        p = fleet.params
+        self.alt_d, self.gain = -float(p["altitude_m"]), float(p["altitude_gain"])
+        self.stale_s = float(p["stale_s"])
+        self.heard_s = np.full(fleet.n, -math.inf)
+        self.code = np.full(fleet.n, -1)   # the latest task's code (-1: none yet)
+        self.command = np.zeros((fleet.n, 3))   # its velocity (north, east) and yaw (NaN: None)
+        self.has_command = np.zeros(fleet.n, dtype=bool)   # it carried a velocity
+        self.takeoff = fleet.home_ned_m.copy()
+        self.takeoff[:, 2] = self.alt_d
+
+    def exec_once(self, fleet: Fleet, rows: np.ndarray) -> None:
+        self.heard_s[rows] = -math.inf
+
+    def on_task(self, fleet: Fleet, i: int, task: Task) -> None:
+        self.heard_s[i] = fleet.ctx(i).time_s
+        self.code[i] = task.code
+        self.has_command[i] = task.waypoint_ned_m is not None
+        if task.waypoint_ned_m is not None:
+            yaw = math.nan if task.yaw_rad is None else task.yaw_rad
+            self.command[i] = (task.waypoint_ned_m[0], task.waypoint_ned_m[1], yaw)
+
+    def exec_loop(self, fleet: Fleet, rows: np.ndarray) -> FleetSetpoints:
+        code = self.code
+        vz = self.gain * (self.alt_d - fleet.pos_ned_m[:, 2])
+        stale = fleet.time_s - self.heard_s > self.stale_s
+        climb = (code == -1) | (code == TAKEOFF)   # no task yet, or TAKEOFF: climb above home
+        fly = ~climb & (code != BRAKE) & ~stale & self.has_command   # the commanded velocity
+        ned = np.where(fly[:, None], self.command, 0.0)   # else brake: zero horizontal velocity
+        ned[:, 2] = vz
+        yaw = np.where(fly, self.command[:, 2], np.nan)
+        ned[climb], yaw[climb] = self.takeoff[climb], np.nan
+        kind = np.where(climb, int(SetpointKind.POSITION), int(SetpointKind.VELOCITY))
+        return FleetSetpoints(kind, ned, yaw)
+
+    def exec_complete(self, fleet: Fleet, rows: np.ndarray) -> np.ndarray:
+        return (self.code == BRAKE) & (row_norms(fleet.vel_ned_m_s[:, :2], 0.3) < 0.3)

@@ -1,8 +1,9 @@
 """One hover run of N drones on a grid, in this process; prints its ``run.json`` figures as JSON.
 
-``python -m swarmbox.bench.hover N [--hover-s S] [--out DIR]`` — the SwarmBox side of the interleaved
-benchmark. The grid and the run are built exactly as ``python -m swarmbox.run algo=hover
-mission=hover`` would build them, with ``initial_positions`` replaced by an N-drone grid.
+``python -m swarmbox.bench.hover N [--hover-s S] [--algo hover|hover_batch] [--out DIR]`` — the
+SwarmBox side of the interleaved benchmark. The grid and the run are built exactly as ``python -m
+swarmbox.run algo=hover mission=hover`` would build them, with ``initial_positions`` replaced by an
+N-drone grid.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ def grid(n: int, spacing_m: float = SPACING_M) -> dict[int, list[float]]:
     return {i: [spacing_m * (i % side), spacing_m * (i // side)] for i in range(n)}
 
 
-def compose(n: int, hover_s: float, extra: Sequence[str] = ()):
+def compose(n: int, hover_s: float, extra: Sequence[str] = (), algo: str = "hover"):
     """The run config of an N-drone hover, composed like the command line does."""
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
@@ -38,7 +39,7 @@ def compose(n: int, hover_s: float, extra: Sequence[str] = ()):
 
     register()
     conf = Path(__file__).resolve().parents[1] / "conf"
-    overrides = ["algo=hover", "mission=hover", f"algo.params.hover_s={hover_s}", "run.progress=false",
+    overrides = [f"algo={algo}", "mission=hover", f"algo.params.hover_s={hover_s}", "run.progress=false",
                  *extra]
     GlobalHydra.instance().clear()
     with initialize_config_dir(config_dir=str(conf), version_base="1.3"):
@@ -51,12 +52,12 @@ def compose(n: int, hover_s: float, extra: Sequence[str] = ()):
     return cfg, choices, overrides
 
 
-def hover_run(n: int, hover_s: float, run_dir: Path, extra: Sequence[str] = ()) -> dict:
+def hover_run(n: int, hover_s: float, run_dir: Path, extra: Sequence[str] = (), algo: str = "hover") -> dict:
     """Execute the run into ``run_dir`` (``extra``: more overrides); returns the manifest plus the
     whole call's wall time."""
     from swarmbox.run.runner import execute
 
-    cfg, choices, overrides = compose(n, hover_s, list(extra))
+    cfg, choices, overrides = compose(n, hover_s, list(extra), algo)
     cpu: dict[str, float] = {}
 
     def measure_loop(swarm) -> None:
@@ -87,17 +88,20 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, help="keep the run here (default: a temporary directory)")
     p.add_argument("--jit", choices=["auto", "always", "never"], default="auto",
                    help="backend.jit: the sim backend's compiled kernel (auto: as a run of that length)")
+    p.add_argument("--algo", choices=["hover", "hover_batch"], default="hover",
+                   help="the per-drone hover or its batch port (the same flight and logs)")
     args = p.parse_args(argv)
     if args.n < 1:
         p.error(f"n must be >= 1, got {args.n}")
     tmp = None if args.out else Path(tempfile.mkdtemp(prefix="swarmbox-bench-"))
     try:
-        m = hover_run(args.n, args.hover_s, args.out or tmp / "run", [f"backend.jit={args.jit}"])
+        m = hover_run(args.n, args.hover_s, args.out or tmp / "run", [f"backend.jit={args.jit}"], args.algo)
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
     ticks, wall = m["ticks"], m["wall_time_s"]
-    print(json.dumps({"system": "swarmbox", "n": args.n, "status": m["status"], "sim_s": m["sim_time_s"],
+    print(json.dumps({"system": "swarmbox", "algo": args.algo, "n": args.n, "status": m["status"],
+                      "sim_s": m["sim_time_s"],
                       "loop_wall_s": round(wall, 4), "rtf": round(m["real_time_factor"], 3),
                       "agent_steps_per_s": round(args.n * ticks / wall) if wall > 0 else None,
                       "loop_cpu_s": round(m["loop_cpu_s"] or float("nan"), 4),

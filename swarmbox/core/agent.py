@@ -22,10 +22,12 @@ from swarmbox.api import (
     Task,
     Telemetry,
 )
+from swarmbox.api.fleet import FleetAlgorithm
 from swarmbox.api.views import read_only, read_only_mission
+from swarmbox.core.batch import FleetDriver
 from swarmbox.core.delivery import DELIVERED, NEW, Window
 from swarmbox.core.messages import GROUND_ID, Heartbeat, ProxAlert, Report, TaskAck, TaskCommand
-from swarmbox.core.node import STAGE_OF, Node, call_hook, hook_error
+from swarmbox.core.node import STAGE_OF, AlgorithmError, Node, call_hook, hook_error
 from swarmbox.core.ports import Vehicle
 from swarmbox.core.rows import NO_TEXT, TEXTS, pack_setpoint
 from swarmbox.core.stages import TERMINAL, Stage, path_to
@@ -49,7 +51,8 @@ _OK_CODE = TEXTS.code("ok")
 
 
 class AgentNode(Node):
-    def __init__(self, node_id: int, *, superior: int, algorithm: DroneAlgorithm, vehicle: Vehicle,
+    def __init__(self, node_id: int, *, superior: int, algorithm: DroneAlgorithm | FleetAlgorithm,
+                 vehicle: Vehicle,
                  **kw) -> None:
         super().__init__(node_id, **kw)
         # its own frozen copies: a hook that writes them fails, and no other node sees a change
@@ -59,6 +62,8 @@ class AgentNode(Node):
         self.home_ned_m = tuple(float(x) for x in vehicle.home_ned_m)
         self.ctx = DroneContext(self)
         self.telemetry: Telemetry = vehicle.telemetry()
+        if isinstance(algorithm, FleetAlgorithm):   # a fleet of one, until a swarm adopts it
+            self.algorithm = FleetDriver(algorithm, [self]).members[0]
         self.complete = False
         self.removed = False
         self.reason = ""
@@ -85,6 +90,15 @@ class AgentNode(Node):
 
     # -- the tick -------------------------------------------------------------------------------
     def tick(self) -> None:
+        self.begin_tick()
+        self.finish_tick()
+
+    def begin_tick(self) -> None:
+        """The inbound half of a tick: telemetry, inbox (stage changes, tasks), watchdogs.
+
+        A fleet driver (``core.batch``) runs every agent's inbound half, then the fleet's loop hooks,
+        then every agent's :meth:`finish_tick`.
+        """
         self.stage_tick += 1
         tel = self.telemetry = self.vehicle.telemetry()
         self._own = None
@@ -99,6 +113,10 @@ class AgentNode(Node):
                 self._hand_over("silent")
         if self.inferiors:
             self.age_inferiors()
+
+    def finish_tick(self) -> None:
+        """The outbound half of a tick: stage work (user hooks, setpoint), Heartbeat/Report, rows."""
+        tel = self.telemetry
         now = self.clock.now()   # the clock stands still within a tick: one reading for its records
         self.complete = self._stage_work(tel, now)
         self._publish(tel, now)
@@ -237,6 +255,8 @@ class AgentNode(Node):
                 self.vehicle.arm()
             try:   # call_hook, inlined: this runs once per drone and tick
                 result = self.algorithm.run_stage(stage, self.ctx)
+            except AlgorithmError:   # a fleet hook's, naming its drones already
+                raise
             except Exception as exc:  # the user's code may raise anything
                 raise hook_error(self, _LOOP_HOOK[stage], exc) from exc
             complete, sp = result

@@ -14,10 +14,12 @@ requests: their effect shows up in later telemetry, exactly as with a real autop
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any, NamedTuple, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol, runtime_checkable
 
 from swarmbox.api import Setpoint, SetpointVerdict, Telemetry
-from swarmbox.core.clock import NodeClock
+
+if TYPE_CHECKING:   # annotations only: the ports load no numpy (a backend check never needs it)
+    from swarmbox.core.clock import NodeClock
 
 
 class Transport(Protocol):

@@ -1,8 +1,9 @@
 """The tick loop: one run of a swarm, from ICEBREAK to TERMINATION (or ABORT).
 
 Per tick, in order: deliver due messages -> ground tick -> each agent tick (state machine, user
-hook, setpoint to its vehicle, state row) -> the backend advances by one tick -> vehicle events
-are logged. A simulation backend runs on a virtual clock as fast as the CPU allows; a real-time
+hook, setpoint to its vehicle, state row; with a FleetAlgorithm, every agent's inbound half, the
+fleet's hooks, every agent's outbound half: ``core.batch``) -> the backend advances by one tick ->
+vehicle events are logged. A simulation backend runs on a virtual clock as fast as the CPU allows; a real-time
 backend (MAVLink, hardware) is paced on the wall clock, optionally sped up by the simulator's
 speed factor.
 """
@@ -20,6 +21,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from swarmbox.core.agent import AgentNode
+from swarmbox.core.batch import FleetDriver
 from swarmbox.core.clock import TimeSource
 from swarmbox.core.ending import EndWatch, outcome
 from swarmbox.core.ground import GroundNode
@@ -75,6 +77,8 @@ class Swarm:
         #: Writes every agent's state row of a tick as one block (set by the builder when the backend
         #: exports its fleet arrays; otherwise each agent logs its own row).
         self.state_log: StateLog | None = None
+        #: Runs a FleetAlgorithm's hooks once per tick for every agent (None: per-drone algorithms)
+        self.fleet_driver = FleetDriver.adopt(agents)
 
     def schedule(self, at_s: float, action: Callable[[Swarm], None]) -> None:
         """Run ``action(swarm)`` at the first tick at or after true time ``at_s``."""
@@ -99,9 +103,12 @@ class Swarm:
             heapq.heappop(self._scheduled)[2](self)
         self.medium.deliver_due()
         self.ground.tick()
-        for agent in self.agents:
-            if not agent.removed:
-                agent.tick()
+        if self.fleet_driver is not None:
+            self.fleet_driver.tick_agents()
+        else:
+            for agent in self.agents:
+                if not agent.removed:
+                    agent.tick()
         if self.state_log is not None:
             self.state_log(t.tick)
         self.backend.step(self.tick_s)

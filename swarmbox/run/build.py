@@ -10,7 +10,7 @@ import numpy as np
 from hydra.utils import get_class, instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from swarmbox.api import DroneAlgorithm, GroundAlgorithm
+from swarmbox.api import DroneAlgorithm, FleetAlgorithm, GroundAlgorithm
 from swarmbox.api.views import read_only_mission
 from swarmbox.core.agent import AgentNode
 from swarmbox.core.clock import ClockSpec, NodeClock, TimeSource
@@ -138,7 +138,8 @@ def _algorithm(node: DictConfig | None, base: type, role: str) -> Any:
         alg = instantiate(node)
     except Exception as exc:
         raise ConfigError(f"algo.{role}: cannot create {node.get('_target_')}: {exc}") from exc
-    if not isinstance(alg, base):
+    allowed = (DroneAlgorithm, FleetAlgorithm) if base is DroneAlgorithm else (base,)
+    if not isinstance(alg, allowed):
         raise ConfigError(f"algo.{role}: {type(alg).__name__} is not a {base.__name__}")
     return alg
 
@@ -163,9 +164,11 @@ def build_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> Swarm:
     ground = GroundNode(_algorithm(cfg.algo.ground, GroundAlgorithm, "ground"), **common(GROUND_ID))
     backend = backend_of(cfg, mission, timing.tick_s, seed, recorder.root.parent)
     agents = []
+    fleet_alg = None   # a FleetAlgorithm: one instance for every drone
     for i, vehicle in zip(mission.drone_ids, backend.vehicles, strict=True):
-        agents.append(AgentNode(i, superior=topo.superiors[i], vehicle=vehicle,
-                                algorithm=_algorithm(cfg.algo.drone, DroneAlgorithm, "drone"), **common(i)))
+        alg = fleet_alg or _algorithm(cfg.algo.drone, DroneAlgorithm, "drone")
+        fleet_alg = alg if isinstance(alg, FleetAlgorithm) else None
+        agents.append(AgentNode(i, superior=topo.superiors[i], vehicle=vehicle, algorithm=alg, **common(i)))
     if cfg.topology.peers == "all":
         for a in mission.drone_ids:
             for b in mission.drone_ids:

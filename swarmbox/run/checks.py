@@ -17,7 +17,7 @@ import numpy as np
 from hydra.utils import get_class
 from omegaconf import DictConfig, OmegaConf
 
-from swarmbox.api import DroneAlgorithm, GroundAlgorithm
+from swarmbox.api import DroneAlgorithm, FleetAlgorithm, GroundAlgorithm
 from swarmbox.core.topology import TopologyError
 from swarmbox.faults import FaultConfigError, FaultEnv, build_faults
 from swarmbox.hal.mavsim.options import MavsimOptions
@@ -159,7 +159,8 @@ def _algo(a: DictConfig) -> None:
             cls = get_class(str(target))
         except Exception as exc:
             raise ConfigError(f"algo.{role}._target_: cannot import '{target}': {exc}") from exc
-        if not (isinstance(cls, type) and issubclass(cls, base)):
+        allowed = (DroneAlgorithm, FleetAlgorithm) if base is DroneAlgorithm else (base,)
+        if not (isinstance(cls, type) and issubclass(cls, allowed)):
             raise ConfigError(f"algo.{role}._target_: {target} is not a {base.__name__}")
     try:   # typed params (the algorithm's Params): a wrong type or an unknown key, before any directory
         typed_params(a)

@@ -1,7 +1,9 @@
 """Hook tracing for the algorithm conformance suite: which hook ran, on which node, in which stage.
 
 :meth:`HookTrace.install` wraps the hooks of every node's algorithm *instance* (the ``@final``
-drivers look hooks up on the instance, so the class is untouched) before the first tick.
+drivers look hooks up on the instance, so the class is untouched) before the first tick. A
+:class:`~swarmbox.api.FleetAlgorithm`'s hooks are wrapped once and each call counts for every drone
+row it was made for, so its lifecycle is checked per drone like a DroneAlgorithm's.
 """
 
 from __future__ import annotations
@@ -30,8 +32,24 @@ class HookTrace:
 
     def install(self, swarm: Any) -> None:
         self._wrap("ground", swarm.ground, GROUND_HOOKS)
+        driver = getattr(swarm, "fleet_driver", None)
+        if driver is not None:   # a FleetAlgorithm: one instance, its calls counted per drone row
+            self._wrap_fleet(driver)
+            return
         for agent in swarm.agents:
             self._wrap(f"drone_{agent.node_id}", agent, DRONE_HOOKS)
+
+    def _wrap_fleet(self, driver: Any) -> None:
+        alg, agents, calls = driver.algorithm, driver.agents, self.calls
+        for hook in DRONE_HOOKS:
+            fn = getattr(alg, hook)
+
+            def traced(fleet: Any, which: Any, *rest: Any, _hook: str = hook, _fn: Callable = fn) -> Any:
+                for i in ([which] if isinstance(which, int) else which.tolist()):   # a row, or rows
+                    calls.append((f"drone_{agents[i].node_id}", _hook, agents[i].stage))
+                return _fn(fleet, which, *rest)
+
+            setattr(alg, hook, traced)
 
     def _wrap(self, label: str, node: Any, hooks: tuple[str, ...]) -> None:
         alg = node.algorithm

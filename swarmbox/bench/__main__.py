@@ -39,7 +39,7 @@ def _run(cmd: list[str]) -> dict:
 
 
 def measure(sizes: list[int], rounds: int, floor: Path, floor_s: float, hover_s: float,
-            jit: str = "auto") -> list[dict]:
+            jit: str = "auto", core: str = "object") -> list[dict]:
     """Every measurement, interleaved: per round, per size, bare loop and SwarmBox back to back."""
     env_python = sys.executable
     rows = []
@@ -47,7 +47,7 @@ def measure(sizes: list[int], rounds: int, floor: Path, floor_s: float, hover_s:
         for n in sizes:
             pair = [[env_python, str(floor), str(n), str(floor_s)],
                     [env_python, "-m", "swarmbox.bench.hover", str(n), "--hover-s", str(hover_s),
-                     "--jit", jit]]
+                     "--jit", jit, "--core", core]]
             if (r + sizes.index(n)) % 2:
                 pair.reverse()
             for cmd in pair:
@@ -103,6 +103,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--jit", choices=["auto", "always", "never"], default="auto",
                    help="backend.jit of the SwarmBox runs (always: the compiled kernel of long runs, loaded "
                         "before the loop; auto: these short runs stay on numpy)")
+    p.add_argument("--core", choices=["object", "fleet"], default="object",
+                   help="run.core of the SwarmBox runs: per-drone node objects, or the fleet's arrays")
     p.add_argument("--json", type=Path, help="also write every measurement and the table here")
     args = p.parse_args(argv)
     if not args.floor.is_file():
@@ -112,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
         print("error: --rounds and every size must be >= 1", file=sys.stderr)
         return 2
     before = os.getloadavg()[0]
-    rows = measure(args.sizes, args.rounds, args.floor, args.floor_s, args.hover_s, args.jit)
+    rows = measure(args.sizes, args.rounds, args.floor, args.floor_s, args.hover_s, args.jit, args.core)
     summary = table(rows, args.sizes)
     after = os.getloadavg()[0]
     print(markdown(summary, (before, after)))

@@ -90,17 +90,21 @@ def main(argv: list[str] | None = None) -> int:
                    help="backend.jit: the sim backend's compiled kernel (auto: as a run of that length)")
     p.add_argument("--algo", choices=["hover", "hover_batch"], default="hover",
                    help="the per-drone hover or its batch port (the same flight and logs)")
+    p.add_argument("--core", choices=["object", "fleet"], default="object",
+                   help="run.core: one node object per drone, or the fleet's arrays (object)")
     args = p.parse_args(argv)
     if args.n < 1:
         p.error(f"n must be >= 1, got {args.n}")
     tmp = None if args.out else Path(tempfile.mkdtemp(prefix="swarmbox-bench-"))
     try:
-        m = hover_run(args.n, args.hover_s, args.out or tmp / "run", [f"backend.jit={args.jit}"], args.algo)
+        m = hover_run(args.n, args.hover_s, args.out or tmp / "run",
+                      [f"backend.jit={args.jit}", f"run.core={args.core}"], args.algo)
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
     ticks, wall = m["ticks"], m["wall_time_s"]
-    print(json.dumps({"system": "swarmbox", "algo": args.algo, "n": args.n, "status": m["status"],
+    print(json.dumps({"system": "swarmbox", "algo": args.algo, "core": args.core, "n": args.n,
+                      "status": m["status"],
                       "sim_s": m["sim_time_s"],
                       "loop_wall_s": round(wall, 4), "rtf": round(m["real_time_factor"], 3),
                       "agent_steps_per_s": round(args.n * ticks / wall) if wall > 0 else None,

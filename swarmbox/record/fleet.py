@@ -86,3 +86,31 @@ class FleetStateLog:
         blocks.commit(b)
         if self._blocks is None:
             self.sink.state_block(blocks.nodes[a:b], [c[a:b] for c in cols])
+
+
+class FleetCoreStateLog(FleetStateLog):
+    """The same rows for a run on the fleet core (``swarmbox.core.fleet``): the stage, armed flag and
+    mode come from the fleet's arrays and this tick's readings instead of each agent."""
+
+    def __init__(self, swarm: Any, sink: StateSink, every_ticks: int) -> None:
+        self.fleet = swarm.fleet
+        super().__init__(swarm.agents, swarm.backend, sink, every_ticks)
+
+    def __call__(self, tick: int) -> None:
+        if tick % self.every:
+            return
+        f = self.fleet
+        n = f.n
+        blocks = self._blocks if self._blocks is not None else StateBlocks(n)
+        a, b = blocks.reserve(n)
+        cols = blocks.columns
+        blocks.nodes[a:b] = self._nodes
+        readings(self._clocks, self._time.t_s, out=cols[0][a:b])
+        cols[1][a:b] = tick
+        cols[2][a:b] = f.stage
+        cols[3][a:b] = f.armed
+        cols[5][a:b] = list(map(MODE_TEXT.__getitem__, f.modes))
+        self.backend.state_into(blocks.values[:, a:b], cols[4][a:b], self._index)
+        blocks.commit(b)
+        if self._blocks is None:
+            self.sink.state_block(blocks.nodes[a:b], [c[a:b] for c in cols])

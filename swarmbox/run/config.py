@@ -138,6 +138,7 @@ class RunConfig:
     # vehicles were not started by the run (px4 backend connecting to running vehicles: hardware).
     hook_timeout_s: Optional[float] = 10.0
     resume: bool = False            # skip a run whose directory holds a finished run (ok/aborted)
+    core: str = "object"            # object: one node object per drone | fleet: arrays (docs/performance.md)
     runtime: str = "single"         # single: one process | processes: ground + one process per agent
     # where log rows are encoded: thread (the run's process, during the loop) | process (one of its own,
     # another core) | auto (= thread, measured the faster of the two)

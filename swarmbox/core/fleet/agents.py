@@ -1,0 +1,159 @@
+"""The drones of the fleet core: the object core's :class:`~swarmbox.core.agent.AgentNode`, its stage
+machine and hooks unchanged, with the per-tick state in arrays of the whole fleet.
+
+A drone's stage, stage tick, completion, liveness counters and message counter live in
+:class:`FleetState` arrays; the node reads and writes them through properties, so every method of
+the object core (entering a stage, a handover, the hooks' context) works as it does there. Each
+tick the fleet does over the arrays what needs no hook — the superior watchdog, a landed or waiting
+drone's completion, the finished test, every Report — and runs :meth:`FleetAgent.fleet_tick`
+(the object core's tick minus what the arrays did) only for the drones whose hooks run, or that have
+a message other than a Heartbeat confirming their stage, or whose watchdog fires.
+"""
+
+from __future__ import annotations
+
+from operator import attrgetter, methodcaller
+from typing import Any
+
+import numpy as np
+
+from swarmbox.api import Telemetry
+from swarmbox.core.agent import AgentNode
+from swarmbox.core.messages import make_msg_id
+from swarmbox.core.stages import TERMINAL, Stage
+
+_TELEMETRY = methodcaller("telemetry")
+_ARMED, _LANDED, _LINK = attrgetter("armed"), attrgetter("landed"), attrgetter("link_ok")
+_MODE = attrgetter("mode")
+DATA = attrgetter("report_data")
+ICEBREAK, PREPARATION, EXECUTION, LANDING, TERMINATION, ABORT = (int(s) for s in (
+    Stage.ICEBREAK, Stage.PREPARATION, Stage.EXECUTION, Stage.LANDING, Stage.TERMINATION, Stage.ABORT))
+
+
+class FleetState:
+    """Per-drone protocol state of the whole fleet (index ``k``: the k-th drone of the mission)."""
+
+    def __init__(self, drone_ids: list[int]) -> None:
+        n = self.n = len(drone_ids)
+        self.ids = np.array(drone_ids, dtype=np.int16)
+        self.stage = np.full(n, ICEBREAK, dtype=np.int64)
+        self.entry_tick = np.zeros(n, dtype=np.int64)     # the tick the current stage was entered
+        self.complete = np.zeros(n, dtype=bool)
+        self.finished = np.zeros(n, dtype=bool)
+        self.seq = np.zeros(n, dtype=np.int64)            # messages sent (the id counter)
+        self.msg_id_base = np.array([make_msg_id(d, 0) for d in drone_ids], dtype=np.int64)
+        self.sup_silent = np.zeros(n, dtype=np.int64)
+        self.heard = np.zeros(n, dtype=bool)
+        self.busy = np.zeros(n, dtype=bool)      # messages for the node's own inbox this tick
+        self.sticky = np.zeros(n, dtype=bool)    # reliable tasks held or an alert in force: ticks in Python
+        self.tels: list[Telemetry] = [None] * n  # type: ignore[list-item]  # this tick's readings
+        self.armed = np.zeros(n, dtype=bool)     # ... as arrays
+        self.landed = np.ones(n, dtype=bool)
+        self.link_ok = np.ones(n, dtype=bool)
+        self.modes: list[Any] = []
+        self.tick_read = 0                           # readings so far
+        self.fetched = np.zeros(n, dtype=np.int64)   # the reading each record in ``tels`` is from
+
+    def read(self, vehicles: list[Any], landed: np.ndarray, crashed: bool) -> None:
+        """Every drone's reading at the start of its tick, as arrays (a drone's commands change only
+        its own vehicle, so reading all first reads what each would have read). The telemetry
+        records are fetched only for the drones that tick in Python (:meth:`fetch`); a crashed
+        vehicle's frozen record is its own, so with a crash every record is fetched."""
+        self.tick_read += 1
+        if crashed:
+            tels = self.tels = list(map(_TELEMETRY, vehicles))
+            self.fetched[:] = self.tick_read
+            self.armed = np.fromiter(map(_ARMED, tels), bool, self.n)
+            self.landed = np.fromiter(map(_LANDED, tels), bool, self.n)
+            self.link_ok = np.fromiter(map(_LINK, tels), bool, self.n)
+            self.modes = list(map(_MODE, tels))
+            return
+        self.armed = np.fromiter(map(_ARMED, vehicles), bool, self.n)   # what the record would say
+        self.landed = landed.copy()
+        self.link_ok[:] = True
+        self.modes = list(map(_MODE, vehicles))
+
+    def fetch(self, vehicles: list[Any], drones: list[int]) -> None:
+        """The telemetry records of ``drones`` (this tick's reading)."""
+        tels, fetched, now = self.tels, self.fetched, self.tick_read
+        for k in drones:
+            if fetched[k] != now:
+                tels[k] = vehicles[k].telemetry()
+                fetched[k] = now
+
+    def settle(self, vehicles: list[Any]) -> None:
+        """Records for the drones not fetched at the last reading, with what the arrays read then
+        (armed, landed, link): what the end-of-run summary and a vehicle failure read."""
+        for k in np.flatnonzero(self.fetched != self.tick_read).tolist():
+            self.tels[k] = vehicles[k].telemetry()._replace(
+                armed=bool(self.armed[k]), landed=bool(self.landed[k]), link_ok=bool(self.link_ok[k]))
+            self.fetched[k] = self.tick_read
+
+
+def _array_property(name: str, cast: type) -> property:
+    def get(self: FleetAgent) -> Any:
+        return cast(getattr(self._fleet, name)[self._k])
+
+    def put(self: FleetAgent, value: Any) -> None:
+        getattr(self._fleet, name)[self._k] = value
+
+    return property(get, put)
+
+
+class FleetAgent(AgentNode):
+    """An AgentNode whose per-tick state lives in the fleet's arrays (see the module's notes)."""
+
+    def __init__(self, node_id: int, *, fleet: FleetState, k: int, **kw: Any) -> None:
+        self._fleet, self._k = fleet, k
+        super().__init__(node_id, **kw)
+        fleet.entry_tick[k] = 0   # the first tick counts 0, as the object core's first increment makes it
+
+    stage_code = _array_property("stage", int)
+    complete = _array_property("complete", bool)
+    finished = _array_property("finished", bool)
+    _seq = _array_property("seq", int)
+    _sup_silent = _array_property("sup_silent", int)
+    _heard_superior = _array_property("heard", bool)
+
+    @property
+    def stage_tick(self) -> int:
+        return self.time.tick - int(self._fleet.entry_tick[self._k])
+
+    @stage_tick.setter
+    def stage_tick(self, value: int) -> None:
+        self._fleet.entry_tick[self._k] = self.time.tick - value
+
+    @property
+    def telemetry(self) -> Telemetry:
+        return self._fleet.tels[self._k]
+
+    @telemetry.setter
+    def telemetry(self, value: Telemetry) -> None:
+        self._fleet.tels[self._k] = value
+
+    def fleet_tick(self) -> None:
+        """AgentNode.tick without what the fleet does over its arrays: the stage tick (derived),
+        the telemetry reading (done for all), the Report (sent with all) and the state row."""
+        tel = self.telemetry
+        self._own = None
+        if not tel.link_ok and self.stage not in TERMINAL:
+            self.event("failsafe", "vehicle_link_lost", self.node_id, action="return_to_launch")
+            self.enter(Stage.ABORT, "link to the autopilot lost", failsafe=True)
+        if self.inbox or self._window_busy or self.proximity:
+            self._drain_inbox()
+        if self._heard_superior and self.stage not in TERMINAL:   # the superior watchdog
+            self._sup_silent += 1
+            if self._sup_silent > self._lost_superior_ticks:
+                self._hand_over("silent")
+        now = self.clock.now()
+        self.complete = self._stage_work(tel, now)
+        if self.stage in TERMINAL and (not tel.armed or self.stage_timed_out()):
+            self.finished = True
+        # held reliable tasks or a proximity alert in force: the inbox is drained every tick
+        self._fleet.sticky[self._k] = bool(self._window_busy or self.proximity)
+
+    def fleet_hooks(self, now: float) -> bool:
+        """The tick of a drone in a loop stage with nothing in its inbox and its watchdog quiet (the
+        fleet counted it): the stage's hooks and setpoint; returns ``complete``."""
+        self._own = None
+        return self._stage_work(self.telemetry, now)

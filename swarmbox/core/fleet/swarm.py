@@ -1,0 +1,210 @@
+"""The fleet core's tick loop: the object core's (:class:`swarmbox.core.swarm.Swarm`) over arrays.
+
+Per tick, in the object core's order: deliver what has arrived (receive rows; the ground's Reports
+into its arrays; a Heartbeat that confirms a drone's stage into the liveness arrays; anything else
+into the drone's inbox) -> the ground's tick -> every drone's tick (:meth:`FleetSwarm.tick_drones`)
+-> the tick's messages routed as one batch -> the state rows -> the backend steps -> its events.
+
+Hooks still run per drone, through each drone's own context. A batch algorithm API would be
+called in :meth:`FleetSwarm.run_hooks`, over the drones in their loop stages, instead of one
+:meth:`~swarmbox.core.fleet.agents.FleetAgent.fleet_tick` each.
+"""
+
+from __future__ import annotations
+
+import heapq
+import json
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from swarmbox.core.clock import readings
+from swarmbox.core.fleet.agents import (
+    ABORT,
+    DATA,
+    EXECUTION,
+    LANDING,
+    PREPARATION,
+    TERMINATION,
+    FleetAgent,
+    FleetState,
+)
+from swarmbox.core.fleet.ground import FleetGround
+from swarmbox.core.fleet.network import HEARTBEAT, FleetNetwork
+from swarmbox.core.fleet.rows import MessageRows, take
+from swarmbox.core.messages import _REPORT_FIXED, TaskAck
+from swarmbox.core.stages import Stage
+from swarmbox.core.swarm import Outcome, Swarm
+
+
+class FleetEndWatch:
+    """EndWatch over the arrays: every drone down (landed, disarmed, in TERMINATION or ABORT) or its
+    link lost, for ``settle_ticks`` (the readings are those of the last tick, as an agent's are)."""
+
+    def __init__(self, settle_ticks: int) -> None:
+        self.settle_ticks = max(1, int(settle_ticks))
+        self._since: int | None = None
+
+    def over(self, swarm: FleetSwarm) -> bool:
+        f = swarm.fleet
+        terminal = (f.stage == TERMINATION) | (f.stage == ABORT)
+        if not (~f.link_ok | (f.landed & ~f.armed & terminal)).all():
+            self._since = None
+            return False
+        tick = swarm.time.tick
+        if self._since is None:
+            self._since = tick
+        return tick - self._since >= self.settle_ticks
+
+
+class FleetSwarm(Swarm):
+    """A Swarm whose drones, network and ground inferiors are arrays (``run.core=fleet``)."""
+
+    def __init__(self, *, fleet: FleetState, network: FleetNetwork, rows: MessageRows,
+                 ground: FleetGround, agents: list[FleetAgent], **kw: Any) -> None:
+        super().__init__(ground=ground, agents=agents, medium=network, **kw)
+        self.fleet, self.network, self.rows = fleet, network, rows
+        self.end_watch = FleetEndWatch(ground.timing.lost_superior_ticks)   # type: ignore[assignment]
+        self._vehicles = [a.vehicle for a in agents]
+        self._clocks = [a.clock for a in agents]
+        t = ground.timing
+        self._lost_superior = t.lost_superior_ticks
+        self._timeouts = np.array([t.timeouts_s[s.name] for s in Stage])   # by stage code
+        self._values = np.empty((14, fleet.n))
+        self._landed = np.empty(fleet.n, dtype=bool)
+        self._crashed = getattr(self.backend, "crashed", None)
+        self.now = np.zeros(fleet.n)
+        self._reports: tuple[np.ndarray, np.ndarray] | None = None   # see network.reports
+
+    # -- the loop ----------------------------------------------------------------------------------
+    def run(self, max_sim_time_s: float, speed: float = 1.0,
+            progress: Callable[[Swarm], None] | None = None) -> Outcome:
+        """Swarm.run; the buffered message rows go to the nodes' logs before every progress call
+        (where the recorder hands its buffers over) and at the end, whatever happens."""
+        def hand_over(swarm: Swarm) -> None:
+            self.rows.hand_over()
+            if progress is not None:
+                progress(swarm)
+
+        try:
+            return super().run(max_sim_time_s, speed, hand_over)
+        finally:
+            self.rows.hand_over()
+            self.fleet.settle(self._vehicles)
+
+    def done(self) -> bool:
+        return self.ground.finished and bool(self.fleet.finished.all())
+
+    def step(self) -> None:
+        t = self.time
+        while self._scheduled and self._scheduled[0][0] <= t.t_s + 1e-9:
+            heapq.heappop(self._scheduled)[2](self)
+        self.deliver()
+        self.network.phase = 0
+        self.ground.tick()
+        self.tick_drones()
+        self.network.route()
+        if self.state_log is not None:
+            self.state_log(t.tick)
+        self.backend.step(self.tick_s)
+        for ev in self.backend.drain_events():
+            log = self._event_logs.get(ev.drone_id)
+            if log is not None:
+                agent = self._by_id[ev.drone_id]
+                log((agent.clock.now(), t.tick, ev.kind, ev.name, ev.drone_id,
+                     json.dumps(ev.data, sort_keys=True, default=str)))
+                if ev.kind == "failure":   # the autopilot cannot fly the mission: the drone aborts
+                    self.fleet.settle(self._vehicles)
+                    agent.vehicle_failed(str(ev.data.get("reason", ev.name)))
+        t.tick += 1
+        t.t_s = t.tick * self.tick_s
+
+    # -- deliveries --------------------------------------------------------------------------------
+    def deliver(self) -> None:
+        """Hand this tick's arrivals over: Reports to the ground's arrays, a Heartbeat confirming its
+        drone's stage to the liveness arrays, everything else to its node's inbox, in order."""
+        due = self.network.deliver()
+        if not len(due["dsti"]):
+            return
+        f, net = self.fleet, self.network
+        to_ground = due["dsti"] == 0
+        if to_ground.any():
+            reports = to_ground & (due["obj"] < 0)
+            self.ground.due = take(due, reports)
+            others = net.objects(due["obj"][to_ground & ~reports])
+            self.ground.acks = [m for m in others if type(m) is TaskAck]
+        k = due["dsti"] - 1
+        to_drone = ~to_ground
+        confirms = to_drone & (due["mtype"] == HEARTBEAT) & (due["stage"] == f.stage[np.maximum(k, 0)])
+        slow = np.zeros(f.n, dtype=bool)
+        slow[k[to_drone & ~confirms]] = True
+        slow[k[to_drone]] |= f.sticky[k[to_drone]]
+        fast = confirms & ~slow[np.maximum(k, 0)]
+        f.sup_silent[k[fast]] = 0
+        f.heard[k[fast]] = True
+        mine = to_drone & ~fast
+        if mine.any():
+            f.busy |= slow
+            for drone, msg in zip(k[mine].tolist(), net.objects(due["obj"][mine]), strict=True):
+                self.agents[drone].inbox.append(msg)
+        net.release(due["obj"])
+
+    # -- the drones' ticks -------------------------------------------------------------------------
+    def tick_drones(self) -> None:
+        f, tick = self.fleet, self.time.tick
+        self.backend.state_into(self._values, self._landed)   # the Reports' positions, read now
+        crashed = self._crashed is not None and bool(self._crashed.any())
+        f.read(self._vehicles, self._landed, crashed)
+        stage = f.stage
+        terminal = (stage == TERMINATION) | (stage == ABORT)
+        loop = (stage == PREPARATION) | (stage == EXECUTION)
+        watch = f.heard & ~terminal
+        fires = watch & (f.sup_silent + 1 > self._lost_superior)   # the watchdog hands over or aborts
+        full = f.busy | f.sticky | (~f.link_ok & ~terminal) | fires
+        rest = ~full
+        f.sup_silent[watch & rest] += 1
+        hooks = rest & loop
+        rest &= ~loop
+        down = (stage == LANDING) | (stage == ABORT)
+        f.complete[rest] = np.where(down, f.landed & ~f.armed, True)[rest]
+        timed_out = (tick - f.entry_tick) * self.tick_s > self._timeouts[stage]
+        f.finished[rest & terminal & (~f.armed | timed_out)] = True
+        self.now = readings(self._clocks, self.time.t_s)
+        self.run_hooks(np.flatnonzero(full), np.flatnonzero(hooks))
+        f.busy[:] = False
+        self.send_reports()
+
+    def run_hooks(self, full: np.ndarray, hooks: np.ndarray) -> None:
+        """The drones that tick in Python, in fleet order: ``full`` the whole tick (messages in their
+        inbox, a watchdog firing), ``hooks`` only their loop stage's hooks. A batch algorithm
+        (``swarmbox.api.fleet``, not covered yet) would have its loop hooks called here once, for
+        ``hooks`` and the drones of ``full`` in a loop stage, after every ``full`` drone's inbox."""
+        net, agents, f = self.network, self.agents, self.fleet
+        f.fetch(self._vehicles, full.tolist())
+        f.fetch(self._vehicles, hooks.tolist())
+        if not len(full):   # the usual tick: nothing a drone sends but its Report
+            now = self.now.tolist()
+            f.complete[hooks] = [agents[k].fleet_hooks(now[k]) for k in hooks.tolist()]
+            return
+        now, whole = self.now.tolist(), set(full.tolist())
+        for k in np.union1d(full, hooks).tolist():
+            net.phase = k + 1   # what this drone sends goes out after the last drone's, before its Report
+            if k in whole:
+                agents[k].fleet_tick()
+            else:
+                f.complete[k] = agents[k].fleet_hooks(now[k])
+    def send_reports(self) -> None:
+        """Every drone's Report, from the arrays (the superiors are fixed: every drone under the ground)."""
+        f = self.fleet
+        if self._reports is None:
+            self._reports = self.network.reports(f.ids.tolist(), [a.superior for a in self.agents])
+        seg, rows = (x.copy() for x in self._reports)
+        data = list(map(DATA, self.agents))
+        f.seq += 1
+        seg["msg_id"], seg["t_sent"] = f.msg_id_base | f.seq, self.now
+        seg["stage"], seg["complete"] = f.stage, f.complete
+        seg["alive"] = f.stage != ABORT
+        seg["pos"], seg["vel"] = self._values[0:3].T, self._values[3:6].T
+        seg["nbytes"] = _REPORT_FIXED + np.fromiter(map(len, data), np.int32, f.n)
+        self.network.send_reports(seg, rows, data)

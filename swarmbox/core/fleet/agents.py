@@ -134,6 +134,12 @@ class FleetAgent(AgentNode):
     def fleet_tick(self) -> None:
         """AgentNode.tick without what the fleet does over its arrays: the stage tick (derived),
         the telemetry reading (done for all), the Report (sent with all) and the state row."""
+        self.fleet_inbound()
+        self.fleet_outbound()
+
+    def fleet_inbound(self) -> None:
+        """The inbound half of :meth:`fleet_tick` (link check, inbox, superior watchdog): a batch
+        algorithm's drones all run it before the fleet's loop hooks."""
         tel = self.telemetry
         self._own = None
         if not tel.link_ok and self.stage not in TERMINAL:
@@ -145,6 +151,10 @@ class FleetAgent(AgentNode):
             self._sup_silent += 1
             if self._sup_silent > self._lost_superior_ticks:
                 self._hand_over("silent")
+
+    def fleet_outbound(self) -> None:
+        """The outbound half of :meth:`fleet_tick`: stage work (hooks, setpoint) and completion."""
+        tel = self.telemetry
         now = self.clock.now()
         self.complete = self._stage_work(tel, now)
         if self.stage in TERMINAL and (not tel.armed or self.stage_timed_out()):

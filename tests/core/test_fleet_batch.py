@@ -46,7 +46,8 @@ def test_flocking_batch_on_the_fleet_core_logs_equal(tmp_path, seed):
      "run.lost_superior_ticks=4"],
 ])
 def test_hover_batch_on_an_impaired_network_logs_equal(tmp_path, network, seed):
-    assert_same_run(tmp_path, [*HOVER, *network, f"seed={seed}"], grid(9), algos=("algo=hover", "algo=hover_batch"))
+    assert_same_run(tmp_path, [*HOVER, *network, f"seed={seed}"], grid(9),
+                    algos=("algo=hover", "algo=hover_batch"))
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

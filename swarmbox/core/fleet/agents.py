@@ -13,7 +13,7 @@ a message other than a Heartbeat confirming their stage, or whose watchdog fires
 from __future__ import annotations
 
 from operator import attrgetter, methodcaller
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -26,6 +26,15 @@ _TELEMETRY = methodcaller("telemetry")
 _ARMED, _LANDED, _LINK = attrgetter("armed"), attrgetter("landed"), attrgetter("link_ok")
 _MODE = attrgetter("mode")
 DATA = attrgetter("report_data")
+
+
+class _Armed(NamedTuple):
+    """What a loop stage's work reads of a reading (``AgentNode._stage_work``: ``tel.armed``)."""
+
+    armed: bool
+
+
+_ARMED_ONLY = {True: _Armed(True), False: _Armed(False)}
 ICEBREAK, PREPARATION, EXECUTION, LANDING, TERMINATION, ABORT = (int(s) for s in (
     Stage.ICEBREAK, Stage.PREPARATION, Stage.EXECUTION, Stage.LANDING, Stage.TERMINATION, Stage.ABORT))
 
@@ -167,3 +176,10 @@ class FleetAgent(AgentNode):
         fleet counted it): the stage's hooks and setpoint; returns ``complete``."""
         self._own = None
         return self._stage_work(self.telemetry, now)
+
+    def fleet_row(self, now: float, armed: bool) -> bool:
+        """fleet_hooks for a batch algorithm's drone: its row of the fleet's hooks (setpoint, safety
+        verdict, rows). A loop stage's work reads of the telemetry only whether the vehicle is armed,
+        which the arrays hold: the drone's record is not fetched."""
+        self._own = None
+        return self._stage_work(_ARMED_ONLY[armed], now)

@@ -33,6 +33,7 @@ from swarmbox.core.fleet.agents import (
 from swarmbox.core.fleet.ground import FleetGround
 from swarmbox.core.fleet.network import HEARTBEAT, FleetNetwork
 from swarmbox.core.fleet.rows import MessageRows, take
+from swarmbox.core.fleet.view import ArrayFleet
 from swarmbox.core.messages import _REPORT_FIXED, TaskAck
 from swarmbox.core.stages import Stage
 from swarmbox.core.swarm import Outcome, Swarm
@@ -108,6 +109,16 @@ class FleetSwarm(Swarm):
         if self.fleet_driver is not None:
             for k, agent in enumerate(agents):
                 agent.net = DroneNet(network, k + 1)
+            self.fleet_driver.fleet = ArrayFleet(agents, self)
+
+    @property
+    def values(self) -> np.ndarray:
+        """This tick's ``state_into`` columns of every drone (14, N), read at the start of its tick."""
+        return self._values
+
+    @property
+    def vehicles(self) -> list[Any]:
+        return self._vehicles
 
     # -- the loop ----------------------------------------------------------------------------------
     def run(self, max_sim_time_s: float, speed: float = 1.0,
@@ -233,16 +244,16 @@ class FleetSwarm(Swarm):
         loop hooks once over the fleet (its snapshot reads every drone), then each drone's stage
         work (its row of the hooks' results: setpoint, safety verdict, rows) in fleet order."""
         agents, f = self.agents, self.fleet
-        f.fetch(self._vehicles, range(f.n))
+        f.fetch(self._vehicles, full.tolist())
         for k in full.tolist():
             agents[k].fleet_inbound()
         self.fleet_driver.step()
-        now, whole = self.now.tolist(), set(full.tolist())
+        now, armed, whole = self.now.tolist(), f.armed.tolist(), set(full.tolist())
         for k in np.union1d(full, hooks).tolist():
             if k in whole:
                 agents[k].fleet_outbound()
             else:
-                f.complete[k] = agents[k].fleet_hooks(now[k])
+                f.complete[k] = agents[k].fleet_row(now[k], armed[k])
 
     def send_reports(self) -> None:
         """Every drone's Report, from the arrays (the superiors are fixed: every drone under the ground)."""

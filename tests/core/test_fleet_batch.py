@@ -55,3 +55,16 @@ def test_formation_batch_on_a_lossy_jittery_network_logs_equal(tmp_path, seed):
     """Tasks lost and reordered: each drone's acknowledgements leave in its own turn of the tick."""
     assert_same_run(tmp_path, ["network=wifi", "network.loss_prob=0.1", f"seed={seed}"],
                     algos=("algo=formation", "algo=formation_batch"))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_acknowledgements_of_reliable_tasks_leave_in_their_drones_turn(tmp_path, seed):
+    """40 reliable tasks per drone under loss and jitter, acknowledged during each drone's inbox drain
+    before the fleet's hooks run: each acknowledgement must take its drone's place in the tick's send
+    order (and so the network's random draws) as on the object core."""
+    probe = ["algo=hover", "mission=hover", "+algo.ground._target_=tests.core.algos.NumberedGround",
+             "network.loss_prob=0.3", "network.jitter_ms=20", "network.latency_ms=5", f"seed={seed}"]
+    manifest = assert_same_run(tmp_path, probe, grid(4), algos=(
+        "algo.drone._target_=tests.core.algos.StatefulDrone",
+        "algo.drone._target_=tests.api.algos.OrderedTasksFleet"))
+    assert manifest["status"] == "ok", manifest["reason"]

@@ -96,7 +96,7 @@ def analyze_main(argv: list[str] | None = None) -> int:
     out = args.out or path
     if (path / "run.json").is_file():
         try:
-            run = load_run(path, ANALYZED_COLUMNS)
+            run = load_run(path, ANALYZED_COLUMNS, streamed=("messages",))   # matched window by window
         except RunLoadError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return EXIT_BAD_INPUT

@@ -46,7 +46,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from swarmbox.analysis import metrics, network, sampling
+from swarmbox.analysis import metrics, network, sampling, windows
+from swarmbox.analysis.flagruns import FlagRuns
 from swarmbox.analysis.load import GROUND, RunData
 from swarmbox.analysis.unify import T
 
@@ -164,21 +165,58 @@ def drone_series(run: RunData, opts: DiagnosisOptions | None = None,
     start, end = span or scan_span(run, opts.stage)
     ticks = np.arange(nearest_tick([start], step)[0], nearest_tick([end], step)[0] + 1)
     drones = list(run.drones)
-    disc = metrics.discrepancy(run.tables["state"])
-    disc = disc[disc["node"].isin(drones)].assign(tick=nearest_tick(disc[T], step)).rename(
-        columns={"node": "drone"})
-    values = {m: _matrix(disc, m, ticks, drones) for m in DISC}
     if flow is None:
         flow = network.message_flow(run.tables["messages"], sampling.tick_s(run), sampling.max_latency_s(run))
+    values = {m: np.full((len(ticks), len(drones)), np.nan) for m in METRICS}
+    first = _first_counted(flow, drones, step, ticks)
+    chunks = network.agent_chunks(flow, drones)
+    column = {d: i for i, d in enumerate(drones)}
+    for chunk in chunks:   # a few drones at a time: each (grid point, drone) is whole in its chunk
+        mine = drones if chunk is None else chunk
+        part = _series_part(run.tables["state"], flow, mine, ticks, opts, step, first, len(chunks) > 1)
+        if part is None:   # grouped otherwise than the whole would be (network.sorted_keys): at once
+            mine, part = drones, _series_part(run.tables["state"], flow, drones, ticks, opts, step, first)
+        at = [column[d] for d in mine]
+        for metric, mat in part.items():
+            values[metric][:, at] = mat
+        if mine is drones:
+            break
+    return Series(ticks, drones, values, step, _sparse(values[DISC[0]], step, opts))
+
+
+def _first_counted(flow: pd.DataFrame, drones: list[int], step: float, ticks: np.ndarray) -> int:
+    """The first grid point a message to or from one of ``drones`` was counted at (after the scan when
+    none was): where the trailing loss windows begin to be full."""
+    counted = flow["counted"].to_numpy(dtype=bool) & (np.isin(flow["src"].to_numpy(), drones)
+                                                      | np.isin(flow["dst"].to_numpy(), drones))
+    sent = nearest_tick(flow["t_send"].to_numpy()[counted], step)
+    return int(sent.min()) if len(sent) else int(ticks[-1]) + 1
+
+
+def _series_part(state: pd.DataFrame, flow: pd.DataFrame, drones: list[int], ticks: np.ndarray,
+                 opts: DiagnosisOptions, step: float, first: int,
+                 chunked: bool = False) -> dict[str, np.ndarray] | None:
+    """The series of ``drones`` (columns in their order); None, when ``chunked``, if a metric's rows
+    come in key order (pandas would average them otherwise than among every drone's)."""
+    mine = state if not chunked else state[state["node"].isin(drones).to_numpy()]
+    disc = metrics.discrepancy(mine)
+    disc = disc[disc["node"].isin(drones)].assign(tick=nearest_tick(disc[T], step)).rename(
+        columns={"node": "drone"})
+    if chunked and network.sorted_keys(disc["tick"].to_numpy(), disc["drone"].to_numpy()):
+        return None
+    values = {m: _matrix(disc, m, ticks, drones) for m in DISC}
+    del disc, mine
     # only the rows each metric reads, never the whole flow doubled: ~0.5 GB a copy at 1,000 drones
     got = network.touching(flow, ["t_recv", "latency_ms"], drones, flow["delivered"].to_numpy(dtype=bool))
     got["tick"] = nearest_tick(got["t_recv"], step)
+    if chunked and network.sorted_keys(got["tick"].to_numpy(), got["agent"].to_numpy()):
+        return None
     values["latency_ms"] = _matrix(got.rename(columns={"agent": "drone"}), "latency_ms", ticks, drones)
     del got
     counted = network.touching(flow, ["t_send", "counted", "lost"], drones,
                                flow["counted"].to_numpy(dtype=bool))
-    values["loss_ratio"] = _loss(counted.rename(columns={"agent": "drone"}), ticks, drones, opts, step)
-    return Series(ticks, drones, values, step, _sparse(values[DISC[0]], step, opts))
+    values["loss_ratio"] = _loss(counted.rename(columns={"agent": "drone"}), ticks, drones, opts, step, first)
+    return values
 
 
 def _sparse(disc: np.ndarray, step: float, opts: DiagnosisOptions) -> list[str]:
@@ -195,15 +233,15 @@ def _sparse(disc: np.ndarray, step: float, opts: DiagnosisOptions) -> list[str]:
 
 
 def _loss(flow: pd.DataFrame, ticks: np.ndarray, drones: list[int], opts: DiagnosisOptions,
-          step: float) -> np.ndarray:
+          step: float, first: int) -> np.ndarray:
     """Trailing-window loss ratio per grid point: cumulative sums of lost and counted by send point. A
     window is only full once the run has sent messages for its whole length: before that (the
-    first seconds of a run) the ratio of a few dozen messages is noise, and is left out."""
+    first seconds of a run) the ratio of a few dozen messages is noise, and is left out (``first``: the
+    grid point of the first counted message of any drone)."""
     width = max(1, int(round(opts.loss_window_s / step)))
     lo = ticks[0] - width
     grid = np.arange(lo, ticks[-1] + 1)
     counted = flow[flow["counted"]].assign(tick=lambda f: nearest_tick(f["t_send"], step))
-    first = int(counted["tick"].min()) if len(counted) else int(ticks[-1]) + 1
     counted = counted[(counted["tick"] >= lo) & (counted["tick"] <= ticks[-1])]
     n = np.nan_to_num(_matrix(counted.assign(one=1.0), "one", grid, drones, "sum"))
     lost = counted.assign(lost_f=counted["lost"].astype("float64"))
@@ -271,24 +309,33 @@ def _episodes(flags: np.ndarray, persist: int) -> list[tuple[int, int]]:
             for a, b in zip(starts, stops, strict=True) if b - a >= persist]
 
 
-def scan(series: Series, opts: DiagnosisOptions | None = None) -> pd.DataFrame:
-    """Every alarm episode: t_u (alarm), metric, drone, value, score, median, iqr, end_u (last flag)."""
+def scan(series: Series, opts: DiagnosisOptions | None = None, chunk: int | None = None) -> pd.DataFrame:
+    """Every alarm episode: t_u (alarm), metric, drone, value, score, median, iqr, end_u (last flag).
+
+    The grid is scanned ``chunk`` points at a time (default: one analysis window,
+    :mod:`~swarmbox.analysis.windows`): the fences are per grid point, so only the chunk's sorted copy
+    is held, and a flag run that crosses a chunk's edge carries on into the next
+    (:class:`~.flagruns.FlagRuns`)."""
     opts = opts or DiagnosisOptions()
-    rows = []
+    chunk = chunk if chunk is not None else windows.points(series.step_s)
+    if chunk < 1:
+        raise ValueError(f"chunk must be >= 1 grid point, not {chunk}")
+    rows: list[dict] = []
     for metric in METRICS:
         mat = series.values.get(metric)
         if mat is None:
             continue
-        score, med, iqr = outlier_matrix(mat, opts.threshold(metric), opts.rule, opts.min_n)
-        for j, drone in enumerate(series.drones):
-            flagged = ~np.isnan(score[:, j])
-            for first, last in _episodes(flagged, opts.persist_points(series.step_s)):
-                rows.append({T: series.ticks[first] * series.step_s, "metric": metric, "drone": int(drone),
-                             "value": float(mat[first, j]), "score": float(score[first, j]),
-                             "median": float(med[first]), "iqr": float(iqr[first]),
-                             "end_u": series.ticks[last] * series.step_s})
-    out = pd.DataFrame(rows, columns=ALARM_COLUMNS)
-    return _ordered(out)
+        runs = FlagRuns(len(series.drones), opts.persist_points(series.step_s))
+        for lo in range(0, len(mat), chunk):
+            part = mat[lo:lo + chunk]
+            score, med, iqr = outlier_matrix(part, opts.threshold(metric), opts.rule, opts.min_n)
+            runs.feed(lo, ~np.isnan(score), (part, score, med, iqr))
+        for j, first, last, seen in runs.close(len(mat)):
+            value, sc, median, spread = seen
+            rows.append({T: series.ticks[first] * series.step_s, "metric": metric,
+                         "drone": int(series.drones[j]), "value": value, "score": sc, "median": median,
+                         "iqr": spread, "end_u": series.ticks[last] * series.step_s})
+    return _ordered(pd.DataFrame(rows, columns=ALARM_COLUMNS))
 
 
 def _ordered(alarms: pd.DataFrame) -> pd.DataFrame:

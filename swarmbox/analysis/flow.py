@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
+from swarmbox.analysis import windows
 from swarmbox.analysis.load import NET
 from swarmbox.analysis.unify import T
 
@@ -34,6 +35,8 @@ LAT = "latency_ms"
 #: still be its receive.
 SLACK_S = 0.005
 _FIT = 2**62   # packed keys stay below this (int64)
+#: Margin on a window's reach: an event this far beyond what a window can match is still handed to it.
+EDGE_S = 1e-6
 
 
 def _ints(series: pd.Series, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -192,6 +195,52 @@ class Window:
         return out
 
 
+def first_by_window(keys: np.ndarray, t_send: np.ndarray, e_keys: np.ndarray, e_t: np.ndarray,
+                    e_val: np.ndarray, missing: float, slack_s: float, max_latency_s: float,
+                    width_s: float) -> np.ndarray:
+    """:meth:`Window.first` of every send, worked out per send-time window of ``width_s``.
+
+    A send of window [a, b) can only be answered by an event in [a - slack, b + max latency], and only
+    a repeat of its key sent before b + max latency + slack can close its window early: each window
+    takes those events and sends (a look-ahead bounded by the run's latency bound, so a message in
+    flight across the window's edge is still matched) and nothing else. The answers are those of one
+    window over the whole run. Sends with no time take their key's first event, from the events of
+    their keys alone."""
+    out = np.full(len(keys), missing, dtype=e_val.dtype)
+    timed = ~np.isnan(t_send)
+    if not (np.isfinite(width_s) and np.isfinite(max_latency_s)) or not timed.any():
+        return Window(t_send, slack_s, max_latency_s).first(keys, e_keys, e_t, e_val, missing)
+    if not timed.all():
+        loose = np.flatnonzero(~timed)
+        mine = np.isin(e_keys, keys[loose])
+        out[loose] = Window(t_send[loose], slack_s, max_latency_s).first(keys[loose], e_keys[mine], e_t[mine],
+                                                                       e_val[mine], missing)
+    sends = np.flatnonzero(timed)
+    sends = sends[np.argsort(t_send[sends], kind="stable")]
+    s_t = t_send[sends]
+    e_order = np.argsort(e_t, kind="stable")   # unknown times last: they answer no timed send
+    e_sorted = e_t[e_order]
+    reach = max_latency_s + slack_s + EDGE_S   # beyond what a comparison's rounding could move
+    first_w = np.floor(s_t[0] / width_s)
+    for w in np.arange(first_w, np.floor(s_t[-1] / width_s) + 1):
+        a, b = w * width_s, (w + 1) * width_s
+        lo, hi = np.searchsorted(s_t, [a, b], side="left")
+        if w == first_w:
+            lo = 0   # rounding of a / width_s: the first window starts at the first send, the last
+        if b > s_t[-1]:
+            hi = len(s_t)   # ends at the last
+        if lo == hi:
+            continue   # an empty window: nothing was sent in it
+        ahead = np.searchsorted(s_t, b + reach, side="right")
+        mine = sends[lo:ahead]   # the window's sends, then the later ones that can close their windows
+        e_lo, e_hi = np.searchsorted(e_sorted, [s_t[lo] - reach, s_t[hi - 1] + reach])
+        ev = np.sort(e_order[e_lo:e_hi])   # log order among equal times, as over the whole run
+        got = Window(t_send[mine], slack_s, max_latency_s).first(keys[mine], e_keys[ev], e_t[ev], e_val[ev],
+                                                                 missing)
+        out[sends[lo:hi]] = got[:hi - lo]
+    return out
+
+
 def _next_later(keys: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Per send: the next strictly later send time with the same key (inf: none; keys that never
     repeat, the usual case, cost one sort)."""
@@ -225,8 +274,24 @@ def _first_arrivals(messages: pd.DataFrame, recv: np.ndarray) -> tuple[np.ndarra
 
 
 def message_flow(messages: pd.DataFrame, tick_s: float = 0.0, max_latency_s: float = np.inf,
-                 slack_s: float = SLACK_S) -> pd.DataFrame:
-    """One row per (message, destination); see :func:`swarmbox.analysis.network.message_flow`."""
+                 slack_s: float = SLACK_S, window_s: float | None = None) -> pd.DataFrame:
+    """One row per (message, destination); see :func:`swarmbox.analysis.network.message_flow`.
+
+    Sends are matched to their receives and drops per send-time window of ``window_s`` (default: the
+    analysis window, :mod:`~swarmbox.analysis.windows`; see :func:`first_by_window`)."""
+    width = windows.window_s() if window_s is None else window_s
+    sends = matched_sends(messages, slack_s, max_latency_s, width)
+    nodes = _distinct(messages["node"].to_numpy())
+    logged = np.sort(nodes[nodes != NET]).astype(np.int64)
+    t_end = float(messages[T].max()) if len(messages) else np.nan
+    return finish_flow(sends, logged, t_end, tick_s)
+
+
+def matched_sends(messages: pd.DataFrame, slack_s: float, max_latency_s: float, width_s: float,
+                  own: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Every send of ``messages`` (only those of the rows ``own`` marks, if given) with its first
+    receive and first drop reason, in the flow's order (send time, msg_id, dst): the columns
+    :func:`finish_flow` completes. Text stays as codes into ``type_words`` and ``reason_words``."""
     kind_codes, kind_words = _codes(messages["kind"])
     send, drop, recv = (np.flatnonzero(kind_codes == _code(kind_words, k)) for k in ("send", "drop", "recv"))
     msg_id, m_known = _ints(messages["msg_id"], send)
@@ -241,48 +306,61 @@ def message_flow(messages: pd.DataFrame, tick_s: float = 0.0, max_latency_s: flo
 
     t_send = messages[T].to_numpy(dtype=np.float64)[send]
     (s_t,) = _known(keyed, t_send)
-    window = Window(s_t, slack_s, max_latency_s)
-    t_recv = _spread(keyed, window.first(keys, r_keys, r_t, r_t, np.nan), np.nan)
+    arrival = first_by_window(keys, s_t, r_keys, r_t, r_t, np.nan, slack_s, max_latency_s, width_s)
+    t_recv = _spread(keyed, arrival, np.nan)
+    del arrival
     reason_codes, reason_words = _codes(messages["reason"])
     reason = np.full(len(send), -1, dtype=np.int64)
     if len(drop):   # the first drop reason (by time, then in log order: the sorts are stable)
         x_t = messages[T].to_numpy(dtype=np.float64)[drop]
-        first = window.first(keys, x_keys, x_t, reason_codes[drop].astype(np.int64), -1)
+        first = first_by_window(keys, s_t, x_keys, x_t, reason_codes[drop].astype(np.int64), -1, slack_s,
+                                max_latency_s, width_s)
         reason = _spread(keyed, first, -1)
-
-    if keyed.all():   # (msg_id, dst) as their one key, ordered alike: the same order from one key less
-        order = np.lexsort((keys, t_send))
+    mine = slice(None) if own is None else np.asarray(own, dtype=bool)[send]
+    if keyed[mine].all():   # (msg_id, dst) as their one key, ordered alike: the same order from one key less
+        order = np.lexsort((_spread(keyed, keys, 0)[mine], t_send[mine]))
     else:
-        order = np.lexsort((_as_column(dst, d_known), _as_column(msg_id, m_known), t_send))   # NaN last
-    # one at a time: each array in log order is freed before the next sorted one is made
-    send = send[order]
-    msg_id = msg_id[order]
-    m_known = m_known[order]
-    dst = dst[order]
-    d_known = d_known[order]
-    t_send = t_send[order]
-    t_recv = t_recv[order]
-    reason = reason[order]
-    del order
-    src, s_known = _ints(messages["src"], send)
+        order = np.lexsort((_as_column(dst, d_known)[mine], _as_column(msg_id, m_known)[mine],
+                            t_send[mine]))   # NaN last
+    if own is not None:
+        order = np.flatnonzero(mine)[order]
+    out = {"send": send, "msg_id": msg_id, "m_known": m_known, "dst": dst, "d_known": d_known,
+           "t_send": t_send, "t_recv": t_recv, "reason": reason}
+    for name in list(out):   # one at a time: each array in log order is freed before its sorted copy is made
+        out[name] = out[name][order]
+    del order, send
+    out["src"], out["s_known"] = _ints(messages["src"], out["send"])
+    out["nbytes"] = messages["nbytes"].to_numpy()[out["send"]].astype(np.float64)
+    if "type" in messages:   # a table loaded without it (no scalar reads it) gives a flow without it
+        type_codes, type_words = _codes(messages["type"])
+        out["type"] = type_codes[out.pop("send")]
+        out["type_words"] = type_words
+    else:
+        del out["send"]
+    out["reason_words"] = reason_words
+    return out
+
+
+def finish_flow(sends: dict[str, np.ndarray], logged: np.ndarray, t_end: float,
+                tick_s: float) -> pd.DataFrame:
+    """The flow of :func:`matched_sends`'s sends: latency, delivered, and which are counted (not in
+    flight at ``t_end``, the last message record, to a destination among the ``logged`` nodes)."""
+    src, s_known, dst, d_known = sends["src"], sends["s_known"], sends["dst"], sends["d_known"]
+    t_send, t_recv, reason = sends["t_send"], sends["t_recv"], sends["reason"]
     lat = (t_recv - t_send) * 1e3
     delivered = ~np.isnan(t_recv)
-    nodes = _distinct(messages["node"].to_numpy())
-    logged = np.sort(nodes[nodes != NET]).astype(np.int64)
-    t_end = float(messages[T].max()) if len(messages) else np.nan
     margin = tick_s if np.isfinite(tick_s) else 0.0
     limit = t_end - _link_max_latency_s(src, dst, s_known & d_known, lat) - margin
     with np.errstate(invalid="ignore"):
         late = t_send > limit
     in_flight = ~delivered & (reason < 0) & late
     counted = np.isin(dst, logged) & d_known & ~in_flight
-    columns = {"msg_id": _as_column(msg_id, m_known)}
-    if "type" in messages:   # a table loaded without it (no scalar reads it) gives a flow without it
-        type_codes, type_words = _codes(messages["type"])
-        columns["type"] = _text(type_codes[send], type_words)
+    columns = {"msg_id": _as_column(sends["msg_id"], sends["m_known"])}
+    if "type" in sends:
+        columns["type"] = _text(sends["type"], sends["type_words"])
     return pd.DataFrame({
         **columns, "src": _as_column(src, s_known), "dst": _as_column(dst, d_known),
-        "nbytes": messages["nbytes"].to_numpy()[send].astype(np.float64), "t_send": t_send, "t_recv": t_recv,
-        "drop_reason": _text(reason, reason_words), LAT: lat, "delivered": delivered, "counted": counted,
-        "lost": counted & ~delivered,
+        "nbytes": sends["nbytes"], "t_send": t_send, "t_recv": t_recv,
+        "drop_reason": _text(reason, sends["reason_words"]), LAT: lat, "delivered": delivered,
+        "counted": counted, "lost": counted & ~delivered,
     }, copy=False)

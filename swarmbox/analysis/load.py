@@ -16,9 +16,7 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,11 +25,17 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
-import pyarrow.parquet as pq
 import yaml
 
-from swarmbox.record.broadcast import expand_broadcasts
-from swarmbox.record.schema import READABLE_VERSIONS, SCHEMA_VERSION, TABLES
+from swarmbox.analysis.arrowpool import arrow_pool as _arrow_pool
+from swarmbox.analysis.arrowpool import disk_bytes as _disk_bytes
+from swarmbox.analysis.readers import check_file, read_arrow, read_batches
+from swarmbox.analysis.rundirs import find_runs, find_unfinished
+from swarmbox.record.schema import TABLES
+
+__all__ = ["EXPECTED", "GROUND", "NET", "REQUIRED", "RunData", "RunLoadError", "check_file", "empty_table",
+           "find_runs", "find_unfinished", "load_run", "node_id", "node_kind", "read_arrow", "read_batches",
+           "read_config", "read_manifest", "read_table"]
 
 GROUND = -1
 NET = -2
@@ -49,8 +53,6 @@ _PANDAS_DTYPE = {
     "float64": "float64", "int64": "int64", "int32": "int32", "int16": "int16", "int8": "int8",
     "bool": "bool", "string": "str",
 }
-_ARROW = {"float64": pa.float64(), "int64": pa.int64(), "int32": pa.int32(), "int16": pa.int16(),
-          "int8": pa.int8(), "bool": pa.bool_(), "string": pa.string()}
 _DTYPES = {t: {c.name: c.dtype for c in cols} for t, cols in TABLES.items()}
 _READERS = 4
 #: Runs whose files total less than this are read one file after another: the pool's hand-offs cost more
@@ -58,13 +60,6 @@ _READERS = 4
 _POOL_BYTES = 32 * 2**20
 #: Text columns read as pandas categoricals: few distinct values in the largest table.
 CATEGORICAL: dict[str, tuple[str, ...]] = {"messages": ("kind", "type", "reason")}
-#: Of those, the ones read straight as Parquet's dictionaries: no string is made per row, and the
-#: broadcast expansion copies indices. Not ``reason``: a sender's broadcast rows hold their destination
-#: lists there (4 KB each at 1,000 drones), and Arrow decodes a dictionary to text by reserving the
-#: dictionary's mean length for every row: the ground's 20 s of a 1,000-drone hover took 1.5 GB for
-#: 3 MB of text, growing with the run. Read as text it costs its own bytes; it becomes a dictionary in
-#: :func:`_to_frame`.
-_READ_AS_DICTIONARY: dict[str, tuple[str, ...]] = {"messages": ("kind", "type")}
 _DRONE = re.compile(r"drone_(\d+)")
 
 
@@ -84,6 +79,10 @@ class RunData:
     problems: list[str] = field(default_factory=list)
     #: True when a table the metrics need is missing or unreadable.
     incomplete: bool = False
+    #: Tables left in their files (each here an empty frame): the analysis reads them window by window.
+    streamed: tuple[str, ...] = ()
+    #: The projection the tables were read with (``load_run``'s ``columns``).
+    columns: dict[str, tuple[str, ...]] | None = None
 
     @property
     def drones(self) -> list[int]:
@@ -151,54 +150,6 @@ def read_table(path: Path, table: str, node: int, problems: list[str]) -> pd.Dat
     """One node's table conformed to the schema, or None (with a problem line) when unreadable."""
     data = read_arrow(path, table, node, problems)
     return None if data is None else _to_frame(table, [data])
-
-
-def read_arrow(path: Path, table: str, node: int, problems: list[str],
-               columns: tuple[str, ...] | None = None) -> pa.Table | None:
-    """One node's table as Arrow in the schema's column order (only ``columns`` if given), plus ``node``.
-
-    Missing columns are filled with nulls and named in ``problems``; a file that cannot be read gives
-    None and a problem line; an absent file gives None alone.
-    """
-    where = f"{path.parent.name}/{path.name}"
-    as_dictionary = _READ_AS_DICTIONARY.get(table, ())
-    try:
-        pf = pq.ParquetFile(path, read_dictionary=as_dictionary)
-        schema = pf.schema_arrow
-        present = set(schema.names)
-        wanted = [c for c in TABLES[table] if columns is None or c.name in columns]
-        names = [c.name for c in wanted if c.name in present]
-        if table == "messages":   # broadcast rows expand to one per destination (see below)
-            names += [c for c in ("dst", "reason") if c in present and c not in names]
-        data = pf.read(columns=names)
-    except FileNotFoundError:
-        return None
-    except Exception as exc:  # noqa: BLE001 - pyarrow raises many types for a corrupt file
-        problems.append(f"{where}: unreadable ({type(exc).__name__}: {exc})")
-        return None
-    meta = schema.metadata or {}
-    version = meta.get(b"swarmbox.schema", SCHEMA_VERSION.encode()).decode()
-    if version not in READABLE_VERSIONS:
-        problems.append(f"{where}: schema version {version}, analyzer reads {', '.join(READABLE_VERSIONS)}")
-    if table == "messages":   # version 2's one row per broadcast, as version 1's one per destination
-        data = expand_broadcasts(data)
-    arrays, fields = [], []
-    for col in wanted:
-        typ = _ARROW[col.dtype]
-        if col.name in as_dictionary:
-            typ = pa.dictionary(pa.int32(), typ)
-        if col.name in present:
-            column = data.column(col.name)
-            if column.type != typ and pa.types.is_dictionary(typ):   # not text in the file: as before
-                column = pc.dictionary_encode(column.cast(typ.value_type))
-            arrays.append(column.cast(typ))
-        else:
-            problems.append(f"{where}: column {col.name!r} missing (filled with NA)")
-            arrays.append(pa.nulls(len(data), typ))
-        fields.append(pa.field(col.name, typ))
-    arrays.append(pa.array(np.full(len(data), node, dtype=np.int16)))
-    fields.append(pa.field("node", pa.int16()))
-    return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
 
 
 def _to_frame(table: str, parts: list[pa.Table]) -> pd.DataFrame:
@@ -277,8 +228,12 @@ def _node_dirs(run_dir: Path, problems: list[str]) -> dict[int, Path]:
     return dirs
 
 
-def load_run(run_dir: str | Path, columns: dict[str, tuple[str, ...]] | None = None) -> RunData:
+def load_run(run_dir: str | Path, columns: dict[str, tuple[str, ...]] | None = None,
+             streamed: tuple[str, ...] = ()) -> RunData:
     """Read a run directory. Raises :class:`RunLoadError` only when ``run.json`` is unusable.
+
+    ``streamed``: tables not read here but left to the analysis to read window by window (only
+    ``messages``); their files are opened, so that a damaged one is named as when it is read.
 
     ``columns`` projects tables (table -> the columns to read; ``node`` always comes along): Parquet
     is columnar, so what is not asked for is never read, which bounds memory on large runs. Files are
@@ -304,7 +259,12 @@ def load_run(run_dir: str | Path, columns: dict[str, tuple[str, ...]] | None = N
         # one table at a time, its Arrow parts freed once it is a frame: the read and the conversion
         # then hold two copies of one table at most, not of the whole run
         tables = {t: _read_table(t, [i for i, job in enumerate(jobs) if job[2] == t], jobs, notes, found,
-                                 (columns or {}).get(t), threaded) for t in TABLES}
+                                 (columns or {}).get(t), threaded) for t in TABLES if t not in streamed}
+    for i, (_, ndir, table) in enumerate(jobs):
+        if table in streamed:
+            path, wanted = ndir / f"{table}.parquet", (columns or {}).get(table)
+            found[i] = check_file(path, table, notes[i], wanted) is True
+    tables |= {t: _concat(t, [], (columns or {}).get(t)) for t in streamed}
     for (nid, ndir, table), data, note in zip(jobs, found, notes, strict=True):
         problems.extend(note)
         if data:
@@ -324,7 +284,22 @@ def load_run(run_dir: str | Path, columns: dict[str, tuple[str, ...]] | None = N
     if "events" not in (columns or {}) and any((run_dir / "logs").glob("drone_*/ulog.json")):
         from swarmbox.analysis.ulog import add_estimator_events  # PX4 runs: EKF2's markers as events
         tables["events"] = add_estimator_events(run_dir, tables["events"], tables.get("state"))
-    return RunData(run_dir, manifest, config, tables, sorted(dirs), problems, incomplete)
+    tables = {t: tables[t] for t in TABLES}   # in the schema's order, streamed or not
+    return RunData(run_dir, manifest, config, tables, sorted(dirs), problems, incomplete, tuple(streamed),
+                   columns)
+
+
+def read_streamed(run: RunData, table: str) -> None:
+    """Read a table ``run`` left in its files into ``run.tables``, whole, as :func:`load_run` would have
+    (its files' problems were named when it was loaded)."""
+    dirs = _node_dirs(run.path, [])
+    jobs = [(nid, ndir, table) for nid, ndir in dirs.items()]
+    notes: list[list[str]] = [[] for _ in jobs]
+    threaded = _disk_bytes(ndir / f"{table}.parquet" for _, ndir, _ in jobs) >= _POOL_BYTES
+    with _arrow_pool(threaded):
+        run.tables[table] = _read_table(table, list(range(len(jobs))), jobs, notes, [False] * len(jobs),
+                                        (run.columns or {}).get(table), threaded)
+    run.streamed = tuple(t for t in run.streamed if t != table)
 
 def _read_table(table: str, indices: list[int], jobs: list[tuple[int, Path, str]], notes: list[list[str]],
                 found: list[bool], columns: tuple[str, ...] | None, threaded: bool) -> pd.DataFrame:
@@ -345,64 +320,9 @@ def _read_table(table: str, indices: list[int], jobs: list[tuple[int, Path, str]
     return _concat(table, [data for data in results if data is not None], columns)
 
 
-@contextmanager
-def _arrow_pool(large: bool) -> Iterator[None]:
-    """While a large run loads, Arrow allocates from a pool that gives freed memory back at once.
-
-    The default pool (mimalloc) kept what the reads and the conversion to pandas freed: 1.4 GB beyond
-    the 0.9 GB of frames of an 80 s 1,000-drone hover, growing with the run. jemalloc with no decay
-    returns it (without jemalloc, the system allocator returns most); the default pool is restored
-    after. A small run stays on the default pool: a sweep's worker reuses its few MB for the next run.
-    """
-    if not large:
-        yield
-        return
-    before = pa.default_memory_pool()
-    try:
-        pa.jemalloc_set_decay_ms(0)
-        pool = pa.jemalloc_memory_pool()
-    except NotImplementedError:   # a pyarrow built without jemalloc
-        pool = pa.system_memory_pool()
-    pa.set_memory_pool(pool)
-    try:
-        yield
-    finally:
-        pa.set_memory_pool(before)
-        before.release_unused()
-
-
-
-def _disk_bytes(paths: Iterable[Path]) -> int:
-    """Total size of the files among ``paths`` that exist."""
-    total = 0
-    for path in paths:
-        try:
-            total += path.stat().st_size
-        except OSError:
-            pass   # absent: read_arrow says so
-    return total
-
-
 def _concat(table: str, parts: list[pa.Table], columns: tuple[str, ...] | None = None) -> pd.DataFrame:
     parts[:] = [p for p in parts if len(p)]
     if not parts:
         frame = empty_table(table)
         return frame if columns is None else frame[[c for c in frame.columns if c in columns or c == "node"]]
     return _to_frame(table, parts)
-
-
-def find_unfinished(root: str | Path) -> list[Path]:
-    """Directories at or below ``root`` that hold a run's files (config.yaml or logs/) but no run.json:
-    runs that were killed, or still run."""
-    root = Path(root)
-    marks = [*root.rglob("config.yaml"), *(p for p in root.rglob("logs") if p.is_dir())]
-    dirs = {p.parent for p in marks}
-    return sorted(d for d in dirs if not (d / "run.json").is_file())
-
-
-def find_runs(root: str | Path) -> list[Path]:
-    """Every run directory (one holding ``run.json``) at or below ``root``, sorted by path."""
-    root = Path(root)
-    if (root / "run.json").is_file():
-        return [root]
-    return sorted(p.parent for p in root.rglob("run.json") if p.is_file())

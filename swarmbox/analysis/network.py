@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 from scipy.sparse.csgraph import connected_components
 
-from swarmbox.analysis import flow
+from swarmbox.analysis import flow, windows
 from swarmbox.analysis.flow import pair_keys
 from swarmbox.analysis.load import NET
 from swarmbox.analysis.unify import T
@@ -129,11 +129,77 @@ def _traffic(flow: pd.DataFrame, agents: pd.Index, span_s: float) -> pd.DataFram
 
 
 def agent_stats(flow: pd.DataFrame, span_s: float) -> pd.DataFrame:
-    """Per agent, over the messages it sent or that were sent to it; plus tx/rx bytes per second."""
-    both = touching(flow, ["counted", "delivered", "lost", _LAT, "nbytes"])
-    out = grouped_stats(both, ["agent"], span_s).drop(columns="bytes_per_s")
-    del both
+    """Per agent, over the messages it sent or that were sent to it; plus tx/rx bytes per second.
+
+    A few agents at a time (:func:`agent_chunks`): each agent's rows are those, in the order, of the
+    whole doubled flow, so its numbers are too; only a chunk's doubled rows are held."""
+    cols = ["counted", "delivered", "lost", _LAT, "nbytes"]
+    chunks = agent_chunks(flow)
+    parts: list[pd.DataFrame] | None = [] if len(chunks) > 1 and not _whole_sorted(flow) else None
+    for agents in chunks if parts is not None else []:
+        both = touching(flow, cols, agents)
+        got = both["agent"].to_numpy()[both["delivered"].to_numpy(dtype=bool)]
+        if sorted_keys(got):   # pandas would average this chunk another way than the whole: no chunks
+            parts = None
+            break
+        parts.append(grouped_stats(both, ["agent"], span_s).drop(columns="bytes_per_s"))
+        del both
+    if parts is None:
+        both = touching(flow, cols)
+        parts = [grouped_stats(both, ["agent"], span_s).drop(columns="bytes_per_s")]
+        del both
+    out = parts[0] if len(parts) == 1 else pd.concat(parts)
     return out.join(_traffic(flow, out.index, span_s)).reset_index()
+
+
+def sorted_keys(*keys: np.ndarray) -> bool:
+    """Whether rows come in ascending order of their keys (compared in turn). Pandas averages the
+    groups of such rows by slices, and other rows one value at a time with compensation, which can
+    differ in the last bit: a chunk of rows is grouped as the whole only if both are sorted or neither is.
+    """
+    if len(keys[0]) < 2:
+        return True
+    ahead = np.zeros(len(keys[0]) - 1, dtype=bool)
+    tied = np.ones(len(keys[0]) - 1, dtype=bool)
+    for key in keys:
+        a, b = key[:-1], key[1:]
+        ahead |= tied & (b > a)
+        tied &= b == a
+    return bool((ahead | tied).all())
+
+
+def _whole_sorted(flow: pd.DataFrame) -> bool:
+    """:func:`sorted_keys` of the agents of the doubled flow's delivered rows (without doubling it)."""
+    got = flow["delivered"].to_numpy(dtype=bool)
+    src, dst = flow["src"].to_numpy()[got], flow["dst"].to_numpy()[got]
+    return sorted_keys(np.concatenate([src[-1:], dst[:1]])) and sorted_keys(src) and sorted_keys(dst)
+
+
+def agent_chunks(flow: pd.DataFrame, agents: list[int] | None = None,
+                 rows: int | None = None) -> list[list[int] | None]:
+    """``agents`` (default: every sender and destination) in ascending chunks that touch at most
+    ``rows`` rows of the doubled flow each, but of two agents at least (one agent's rows alone are in
+    order: pandas would average them another way, :func:`sorted_keys`); ``[agents]`` as given (None:
+    all) when one chunk holds them all."""
+    rows = windows.TOUCH_ROWS if rows is None else rows
+    if 2 * len(flow) <= rows:
+        return [agents]
+    counts = pd.concat([flow["src"], flow["dst"]], ignore_index=True).value_counts()
+    ids = counts.index.to_numpy()
+    if agents is not None:
+        ids = ids[np.isin(ids, agents)]
+    ids = np.sort(ids)
+    sizes = counts.reindex(ids).to_numpy(dtype=np.int64)
+    chunks, current, held = [], [], 0
+    for agent, size in zip(ids.tolist(), sizes.tolist(), strict=True):
+        if len(current) >= 2 and held + size > rows:
+            chunks.append(current)
+            current, held = [], 0
+        current.append(agent)
+        held += size
+    if len(current) == 1 and chunks:
+        chunks[-1].append(current.pop())   # the last agent joins the chunk before it
+    return [*chunks, current] if current else chunks or [[]]
 
 
 def agent_traffic(flow: pd.DataFrame, span_s: float) -> pd.DataFrame:

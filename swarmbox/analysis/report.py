@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from swarmbox.analysis import anomaly, metrics, mission, network, sampling
+from swarmbox.analysis import anomaly, flowstream, metrics, mission, network, sampling
 from swarmbox.analysis import diagnosis as dg
 from swarmbox.analysis.catalog import Direction
 from swarmbox.analysis.load import RunData, load_run
@@ -97,13 +97,16 @@ def _unified_times(run: RunData) -> list[np.ndarray]:
     return [t for t in times if len(t) and not np.isnan(t).all()]
 
 
-def _last_time(run: RunData) -> float:
+def _last_time(run: RunData, streamed: float = np.nan) -> float:
+    """The last unified time of any record (``streamed``: that of the tables left in their files)."""
     ends = [float(np.nanmax(t)) for t in _unified_times(run)]
+    ends += [streamed] if np.isfinite(streamed) else []
     return max(ends) if ends else np.nan
 
 
-def _first_time(run: RunData) -> float:
+def _first_time(run: RunData, streamed: float = np.nan) -> float:
     starts = [float(np.nanmin(t)) for t in _unified_times(run)]
+    starts += [streamed] if np.isfinite(streamed) else []
     return min(starts) if starts else np.nan
 
 
@@ -152,11 +155,15 @@ def analyze_run(source: str | Path | RunData, opts: AnalysisOptions | None = Non
     opts = opts or AnalysisOptions()
     run = source if isinstance(source, RunData) else load_run(source)
     clocks = unify(run, opts.clock, sent_times=not opts.scalars_only)
-    window = metrics.exec_window(run.tables["stages"], _last_time(run))
+    # messages left in their files (load_run's ``streamed``): matched window by window, never held
+    flow, first, last = flowstream.run_flow(run, clocks, sampling.tick_s(run), sampling.max_latency_s(run),
+                                            not opts.scalars_only)
+    window = metrics.exec_window(run.tables["stages"], _last_time(run, last))
     if window is None:
         run.problems.append("the ground never entered EXECUTION: workload metrics are NaN")
-    span = window or metrics.ExecWindow(_first_time(run), _last_time(run), False)
-    flow = network.message_flow(run.tables["messages"], sampling.tick_s(run), sampling.max_latency_s(run))
+    span = window or metrics.ExecWindow(_first_time(run, first), _last_time(run, last), False)
+    if flow is None:
+        flow = network.message_flow(run.tables["messages"], sampling.tick_s(run), sampling.max_latency_s(run))
     exec_flow = network.between(flow, span.start, span.end)
     full = not opts.scalars_only
     links = network.link_stats(exec_flow, span.duration) if full else pd.DataFrame()

@@ -26,13 +26,14 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from scipy import stats
 
-from swarmbox.analysis import clock_steps, sampling
-from swarmbox.analysis.load import GROUND, NET, RunData, node_id
+from swarmbox.analysis import clock_steps, clockstream, sampling
+from swarmbox.analysis.load import GROUND, NET, RunData, node_id, read_streamed
 
 #: Name of the unified-time column added to every table (seconds on the ground clock).
 T = "t_u"
@@ -114,30 +115,7 @@ def _window_arrays(samples: pd.DataFrame | dict[str, np.ndarray],
                    window_s: float) -> dict[tuple[int, int], dict[str, np.ndarray]]:
     """The columns of :func:`all_window_minima`'s frames, as arrays."""
     a, b, t_a, t_b, sample = (np.asarray(samples[c]) for c in ("a", "b", "t_a", "t_b", "sample"))
-    other = a != b
-    if not other.all():   # a node's messages to itself say nothing about clocks
-        a, b, t_a, t_b, sample = a[other], b[other], t_a[other], t_b[other], sample[other]
-    fwd = a < b
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    t = np.where(fwd, t_a, t_b)   # both directions on the clock of ``lo``
-    w = np.floor(t / window_s)
-    order = np.lexsort((w, hi, lo))
-    lo = lo[order]   # one at a time: each unsorted array is freed before the next sorted one is made
-    hi = hi[order]
-    w = w[order]
-    t = t[order]
-    pair = np.concatenate([[True], (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])])
-    starts = np.flatnonzero(pair | np.concatenate([[True], w[1:] != w[:-1]]))
-    if not len(starts):
-        return {}
-    t_lo, t_hi = np.minimum.reduceat(t, starts), np.maximum.reduceat(t, starts)
-    table = {"fwd": np.fmin.reduceat(np.where(fwd, sample, np.nan)[order], starts),   # NaN-skipping min
-             "bwd": np.fmin.reduceat(np.where(fwd, np.nan, sample)[order], starts),
-             "t_lo": t_lo, "t_hi": t_hi, "t_mid": (t_lo + t_hi) / 2}
-    first = np.flatnonzero(pair[starts])   # the first window of each pair
-    bounds = [*first.tolist(), len(starts)]
-    return {(int(lo[starts[i]]), int(hi[starts[i]])): {k: v[i:j] for k, v in table.items()}
-            for i, j in zip(bounds[:-1], bounds[1:], strict=True)}
+    return clockstream.pair_windows(clockstream.window_parts(a, b, t_a, t_b, sample, window_s))
 
 
 def two_way_estimate(a: int, b: int, win: pd.DataFrame | dict[str, np.ndarray],
@@ -173,7 +151,12 @@ def one_way_estimate(a: int, b: int, win: pd.DataFrame | dict[str, np.ndarray], 
 
 def estimate_pairs(samples: pd.DataFrame | dict[str, np.ndarray], opts: ClockOptions) -> list[PairEstimate]:
     """Two-way estimates for every pair heard both ways, then one-way ones for the rest."""
-    wins = _window_arrays(samples, opts.window_s)
+    return pair_estimates(_window_arrays(samples, opts.window_s), opts)
+
+
+def pair_estimates(wins: dict[tuple[int, int], dict[str, np.ndarray]],
+                   opts: ClockOptions) -> list[PairEstimate]:
+    """:func:`estimate_pairs` from the pairs' window statistics."""
     two_way = [e for p, w in wins.items() if (e := two_way_estimate(*p, w, opts))]
     typical = float(np.median([e.delay_s for e in two_way])) if two_way else 0.0
     done = {(e.a, e.b) for e in two_way}
@@ -237,6 +220,15 @@ def estimate_clocks(messages: pd.DataFrame, nodes: list[int],
     return solve_clocks(estimate_pairs(_sample_arrays(messages), opts), nodes)
 
 
+def estimate_clocks_streamed(run_dir: str | Path, nodes: list[int], opts: ClockOptions | None = None,
+                             problems: list[str] | None = None) -> pd.DataFrame:
+    """:func:`estimate_clocks` of a run's messages, read from its files a Parquet batch at a time: what is
+    held is the per-(pair, window) statistics (:mod:`.clockstream`), whatever the run's length."""
+    opts = opts or ClockOptions()
+    part = clockstream.run_window_parts(Path(run_dir), opts.window_s, problems=problems)
+    return solve_clocks(pair_estimates(clockstream.pair_windows(part), opts), nodes)
+
+
 def to_unified(t_local: pd.Series, node: pd.Series, clocks: pd.DataFrame) -> pd.Series:
     """Map node-local times to ground time with each node's estimated offset and drift (a node with
     no estimate, or a NaN one, keeps 0)."""
@@ -289,20 +281,34 @@ def unify(run: RunData, opts: ClockOptions | None = None, sent_times: bool = Tru
     steps = (clock_steps.find_steps(run.tables["state"], tick_s, opts.step_min_s)
              if opts.step_min_s > 0 else [])
     if steps:
+        if "messages" in run.streamed:   # the lives are told apart in each node's whole log
+            read_streamed(run, "messages")
         return _unify_lives(run, opts, steps, tick_s, sent_times)
     return _unify_plain(run, opts, sent_times)
 
 
 def _unify_plain(run: RunData, opts: ClockOptions, sent_times: bool) -> pd.DataFrame:
-    """:func:`unify` with one clock per node."""
-    clocks = estimate_clocks(run.tables["messages"], run.nodes, opts)
-    for frame in run.tables.values():
-        frame[T] = to_unified(frame["t_s"], frame["node"], clocks)
-    if sent_times:
-        msgs = run.tables["messages"]
-        msgs["t_sent_u"] = to_unified(msgs["t_sent_s"], msgs["src"].fillna(GROUND), clocks)
+    """:func:`unify` with one clock per node (from the files, batch by batch, when the messages were left
+    there)."""
+    if "messages" in run.streamed:
+        clocks = estimate_clocks_streamed(run.path, run.nodes, opts)
+    else:
+        clocks = estimate_clocks(run.tables["messages"], run.nodes, opts)
+    for name, frame in run.tables.items():
+        if name != "messages":
+            frame[T] = to_unified(frame["t_s"], frame["node"], clocks)
+    unify_messages(run, clocks, sent_times)
     clocks = clocks.assign(life=0, from_u=np.nan, step_s=0.0)
     return _with_truth(clocks, run.manifest.get("clocks") or {})
+
+
+def unify_messages(run: RunData, clocks: pd.DataFrame, sent_times: bool = True) -> None:
+    """``t_u`` (and ``t_sent_u``, the sender's stamp on the ground clock) of the messages, one clock
+    per node."""
+    msgs = run.tables["messages"]
+    msgs[T] = to_unified(msgs["t_s"], msgs["node"], clocks)
+    if sent_times:
+        msgs["t_sent_u"] = to_unified(msgs["t_sent_s"], msgs["src"].fillna(GROUND), clocks)
 
 
 def _unify_lives(run: RunData, opts: ClockOptions, steps: list[clock_steps.Step], tick_s: float,

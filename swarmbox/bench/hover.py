@@ -47,8 +47,12 @@ def compose(n: int, hover_s: float, extra: Sequence[str] = (), algo: str = "hove
     choices = run_choices(cfg, OmegaConf.to_container(cfg.hydra.runtime.choices))
     with open_dict(cfg):
         del cfg["hydra"]
-        cfg.mission.initial_positions = grid(n)
+        cfg.mission.initial_positions = homes = grid(n)
         cfg.mission.swarm_size = n
+        # a large grid reaches past the default geofence (500 m at 10,000 drones): widen it to the grid
+        reach = max(math.hypot(*home) for home in homes.values()) + SPACING_M
+        if reach > cfg.run.safety.geofence_radius_m:
+            cfg.run.safety.geofence_radius_m = float(math.ceil(reach))
     return cfg, choices, overrides
 
 

@@ -39,7 +39,7 @@ def _run(cmd: list[str]) -> dict:
 
 
 def measure(sizes: list[int], rounds: int, floor: Path, floor_s: float, hover_s: float,
-            jit: str = "auto", core: str = "object") -> list[dict]:
+            jit: str = "auto", core: str = "object", algo: str = "hover") -> list[dict]:
     """Every measurement, interleaved: per round, per size, bare loop and SwarmBox back to back."""
     env_python = sys.executable
     rows = []
@@ -47,7 +47,7 @@ def measure(sizes: list[int], rounds: int, floor: Path, floor_s: float, hover_s:
         for n in sizes:
             pair = [[env_python, str(floor), str(n), str(floor_s)],
                     [env_python, "-m", "swarmbox.bench.hover", str(n), "--hover-s", str(hover_s),
-                     "--jit", jit, "--core", core]]
+                     "--jit", jit, "--core", core, "--algo", algo]]
             if (r + sizes.index(n)) % 2:
                 pair.reverse()
             for cmd in pair:
@@ -105,6 +105,8 @@ def main(argv: list[str] | None = None) -> int:
                         "before the loop; auto: these short runs stay on numpy)")
     p.add_argument("--core", choices=["object", "fleet"], default="object",
                    help="run.core of the SwarmBox runs: per-drone node objects, or the fleet's arrays")
+    p.add_argument("--algo", choices=["hover", "hover_batch"], default="hover",
+                   help="the SwarmBox runs' algorithm: per-drone hover or its batch port (hover)")
     p.add_argument("--json", type=Path, help="also write every measurement and the table here")
     args = p.parse_args(argv)
     if not args.floor.is_file():
@@ -114,7 +116,8 @@ def main(argv: list[str] | None = None) -> int:
         print("error: --rounds and every size must be >= 1", file=sys.stderr)
         return 2
     before = os.getloadavg()[0]
-    rows = measure(args.sizes, args.rounds, args.floor, args.floor_s, args.hover_s, args.jit, args.core)
+    rows = measure(args.sizes, args.rounds, args.floor, args.floor_s, args.hover_s, args.jit, args.core,
+                   args.algo)
     summary = table(rows, args.sizes)
     after = os.getloadavg()[0]
     print(markdown(summary, (before, after)))

@@ -219,9 +219,6 @@ def refusal(cfg: DictConfig, mission: Mission) -> str:
         return "the live monitor"
     if not hasattr(backend_class(cfg.backend), "state_into"):
         return f"backend {cfg.backend.get('name', '?')} (no fleet arrays)"
-    drone = cfg.algo.drone
-    if drone is not None and issubclass(get_class(drone._target_), FleetAlgorithm):
-        return "a batch algorithm (FleetAlgorithm)"
     ground = cfg.algo.ground
     if ground is not None:
         cls = get_class(ground._target_)
@@ -268,9 +265,13 @@ def build_fleet_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> 
                          **common(GROUND_ID))
     backend = backend_of(cfg, mission, timing.tick_s, seed, recorder.root.parent)
     fleet = FleetState(ids)
-    agents = [FleetAgent(i, fleet=fleet, k=k, superior=topo.superiors[i], vehicle=vehicle,
-                         algorithm=_algorithm(cfg.algo.drone, DroneAlgorithm, "drone"), **common(i))
-              for k, (i, vehicle) in enumerate(zip(ids, backend.vehicles, strict=True))]
+    agents = []
+    fleet_alg = None   # a FleetAlgorithm: one instance for every drone, as build_swarm makes it
+    for k, (i, vehicle) in enumerate(zip(ids, backend.vehicles, strict=True)):
+        alg = fleet_alg or _algorithm(cfg.algo.drone, DroneAlgorithm, "drone")
+        fleet_alg = alg if isinstance(alg, FleetAlgorithm) else None
+        agents.append(FleetAgent(i, fleet=fleet, k=k, superior=topo.superiors[i], vehicle=vehicle,
+                                 algorithm=alg, **common(i)))
     event_logs = {i: recorder.node(i).appender("events") for i in ids}
     swarm = FleetSwarm(fleet=fleet, network=network, rows=rows, time=time, tick_s=timing.tick_s,
                        ground=ground, agents=agents, backend=backend, event_logs=event_logs)

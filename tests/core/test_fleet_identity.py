@@ -40,10 +40,13 @@ def _tables(run_dir: Path) -> list[Path]:
 
 
 def assert_same_run(tmp_path: Path, overrides: list[str], homes: dict[int, list[float]] | None = None,
-                    ) -> dict:
-    """Both cores fly ``overrides``; every table and the outcome must be equal. Returns run.json."""
-    obj = _fly(tmp_path / "object", "object", overrides, homes)
-    fleet = _fly(tmp_path / "fleet", "fleet", overrides, homes)
+                    algos: tuple[str, str] | None = None) -> dict:
+    """Both cores fly ``overrides``; every table and the outcome must be equal. Returns run.json.
+    ``algos``: the object core's and the fleet core's algorithm override (a per-drone algorithm and
+    its batch port), added to ``overrides``."""
+    obj_algo, fleet_algo = [algos[0]] if algos else [], [algos[1]] if algos else []
+    obj = _fly(tmp_path / "object", "object", [*obj_algo, *overrides], homes)
+    fleet = _fly(tmp_path / "fleet", "fleet", [*fleet_algo, *overrides], homes)
     assert {k: obj.get(k) for k in _OUTCOME} == {k: fleet.get(k) for k in _OUTCOME}
     files = _tables(tmp_path / "object")
     assert files == _tables(tmp_path / "fleet")
@@ -116,7 +119,6 @@ def test_proximity_alerts_logs_equal(tmp_path):
     ("topology.peers=all", "topology.peers=all"),
     ("run.runtime=processes", "run.runtime=processes"),
     ("run.proximity_window_s=1.0", "run.proximity_window_s"),
-    ("algo=hover_batch", "a batch algorithm (FleetAlgorithm)"),
 ])
 def test_what_the_fleet_core_does_not_cover_is_refused_before_anything_is_written(tmp_path, override, what):
     cfg, choices = compose_config([*HOVER, override, "run.core=fleet", "run.progress=false"])

@@ -13,7 +13,7 @@ a message other than a Heartbeat confirming their stage, or whose watchdog fires
 from __future__ import annotations
 
 from operator import attrgetter, methodcaller
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -26,6 +26,15 @@ _TELEMETRY = methodcaller("telemetry")
 _ARMED, _LANDED, _LINK = attrgetter("armed"), attrgetter("landed"), attrgetter("link_ok")
 _MODE = attrgetter("mode")
 DATA = attrgetter("report_data")
+
+
+class _Armed(NamedTuple):
+    """What a loop stage's work reads of a reading (``AgentNode._stage_work``: ``tel.armed``)."""
+
+    armed: bool
+
+
+_ARMED_ONLY = {True: _Armed(True), False: _Armed(False)}
 ICEBREAK, PREPARATION, EXECUTION, LANDING, TERMINATION, ABORT = (int(s) for s in (
     Stage.ICEBREAK, Stage.PREPARATION, Stage.EXECUTION, Stage.LANDING, Stage.TERMINATION, Stage.ABORT))
 
@@ -134,6 +143,12 @@ class FleetAgent(AgentNode):
     def fleet_tick(self) -> None:
         """AgentNode.tick without what the fleet does over its arrays: the stage tick (derived),
         the telemetry reading (done for all), the Report (sent with all) and the state row."""
+        self.fleet_inbound()
+        self.fleet_outbound()
+
+    def fleet_inbound(self) -> None:
+        """The inbound half of :meth:`fleet_tick` (link check, inbox, superior watchdog): a batch
+        algorithm's drones all run it before the fleet's loop hooks."""
         tel = self.telemetry
         self._own = None
         if not tel.link_ok and self.stage not in TERMINAL:
@@ -145,6 +160,10 @@ class FleetAgent(AgentNode):
             self._sup_silent += 1
             if self._sup_silent > self._lost_superior_ticks:
                 self._hand_over("silent")
+
+    def fleet_outbound(self) -> None:
+        """The outbound half of :meth:`fleet_tick`: stage work (hooks, setpoint) and completion."""
+        tel = self.telemetry
         now = self.clock.now()
         self.complete = self._stage_work(tel, now)
         if self.stage in TERMINAL and (not tel.armed or self.stage_timed_out()):
@@ -157,3 +176,10 @@ class FleetAgent(AgentNode):
         fleet counted it): the stage's hooks and setpoint; returns ``complete``."""
         self._own = None
         return self._stage_work(self.telemetry, now)
+
+    def fleet_row(self, now: float, armed: bool) -> bool:
+        """fleet_hooks for a batch algorithm's drone: its row of the fleet's hooks (setpoint, safety
+        verdict, rows). A loop stage's work reads of the telemetry only whether the vehicle is armed,
+        which the arrays hold: the drone's record is not fetched."""
+        self._own = None
+        return self._stage_work(_ARMED_ONLY[armed], now)

@@ -5,9 +5,9 @@ into its arrays; a Heartbeat that confirms a drone's stage into the liveness arr
 into the drone's inbox) -> the ground's tick -> every drone's tick (:meth:`FleetSwarm.tick_drones`)
 -> the tick's messages routed as one batch -> the state rows -> the backend steps -> its events.
 
-Hooks still run per drone, through each drone's own context. A batch algorithm API would be
-called in :meth:`FleetSwarm.run_hooks`, over the drones in their loop stages, instead of one
-:meth:`~swarmbox.core.fleet.agents.FleetAgent.fleet_tick` each.
+Hooks run per drone, through each drone's own context; a batch algorithm's
+(:class:`~swarmbox.api.FleetAlgorithm`) loop hooks run once per tick over the fleet
+(:meth:`FleetSwarm.run_batch`), in the order of the driver contract of :mod:`swarmbox.api.fleet`.
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ from swarmbox.core.fleet.agents import (
 from swarmbox.core.fleet.ground import FleetGround
 from swarmbox.core.fleet.network import HEARTBEAT, FleetNetwork
 from swarmbox.core.fleet.rows import MessageRows, take
+from swarmbox.core.fleet.view import ArrayFleet
 from swarmbox.core.messages import _REPORT_FIXED, TaskAck
 from swarmbox.core.stages import Stage
 from swarmbox.core.swarm import Outcome, Swarm
@@ -58,6 +59,35 @@ class FleetEndWatch:
         return tick - self._since >= self.settle_ticks
 
 
+class DroneNet:
+    """Drone ``k``'s view of the fleet network with a batch algorithm: whatever it sends, whenever
+    (its inbox, the fleet's hooks through ``fleet.ctx(k)``, its setpoint's turn), goes out in drone
+    ``k``'s turn of the tick, in the order sent: what the object core's held calls
+    (``swarmbox.core.batch.CallHolder``) replay."""
+
+    __slots__ = ("net", "phase")
+
+    def __init__(self, net: FleetNetwork, phase: int) -> None:
+        self.net, self.phase = net, phase
+
+    def send(self, msg: Any, dst: int) -> None:
+        self.net.phase = self.phase
+        self.net.send(msg, dst)
+
+    def publish(self, msg: Any) -> None:
+        self.net.phase = self.phase
+        self.net.publish(msg)
+
+    def subscribe(self, subscriber: int, publisher: int) -> None:
+        self.net.subscribe(subscriber, publisher)
+
+    def unsubscribe(self, subscriber: int, publisher: int) -> None:
+        self.net.unsubscribe(subscriber, publisher)
+
+    def has_subscribers(self, publisher: int) -> bool:
+        return self.net.has_subscribers(publisher)
+
+
 class FleetSwarm(Swarm):
     """A Swarm whose drones, network and ground inferiors are arrays (``run.core=fleet``)."""
 
@@ -76,6 +106,19 @@ class FleetSwarm(Swarm):
         self._crashed = getattr(self.backend, "crashed", None)
         self.now = np.zeros(fleet.n)
         self._reports: tuple[np.ndarray, np.ndarray] | None = None   # see network.reports
+        if self.fleet_driver is not None:
+            for k, agent in enumerate(agents):
+                agent.net = DroneNet(network, k + 1)
+            self.fleet_driver.fleet = ArrayFleet(agents, self)
+
+    @property
+    def values(self) -> np.ndarray:
+        """This tick's ``state_into`` columns of every drone (14, N), read at the start of its tick."""
+        return self._values
+
+    @property
+    def vehicles(self) -> list[Any]:
+        return self._vehicles
 
     # -- the loop ----------------------------------------------------------------------------------
     def run(self, max_sim_time_s: float, speed: float = 1.0,
@@ -171,15 +214,16 @@ class FleetSwarm(Swarm):
         timed_out = (tick - f.entry_tick) * self.tick_s > self._timeouts[stage]
         f.finished[rest & terminal & (~f.armed | timed_out)] = True
         self.now = readings(self._clocks, self.time.t_s)
-        self.run_hooks(np.flatnonzero(full), np.flatnonzero(hooks))
+        if self.fleet_driver is not None:
+            self.run_batch(np.flatnonzero(full), np.flatnonzero(hooks))
+        else:
+            self.run_hooks(np.flatnonzero(full), np.flatnonzero(hooks))
         f.busy[:] = False
         self.send_reports()
 
     def run_hooks(self, full: np.ndarray, hooks: np.ndarray) -> None:
         """The drones that tick in Python, in fleet order: ``full`` the whole tick (messages in their
-        inbox, a watchdog firing), ``hooks`` only their loop stage's hooks. A batch algorithm
-        (``swarmbox.api.fleet``, not covered yet) would have its loop hooks called here once, for
-        ``hooks`` and the drones of ``full`` in a loop stage, after every ``full`` drone's inbox."""
+        inbox, a watchdog firing), ``hooks`` only their loop stage's hooks."""
         net, agents, f = self.network, self.agents, self.fleet
         f.fetch(self._vehicles, full.tolist())
         f.fetch(self._vehicles, hooks.tolist())
@@ -194,6 +238,23 @@ class FleetSwarm(Swarm):
                 agents[k].fleet_tick()
             else:
                 f.complete[k] = agents[k].fleet_hooks(now[k])
+
+    def run_batch(self, full: np.ndarray, hooks: np.ndarray) -> None:
+        """run_hooks for a batch algorithm: every ``full`` drone's inbound half in fleet order, the
+        loop hooks once over the fleet (its snapshot reads every drone), then each drone's stage
+        work (its row of the hooks' results: setpoint, safety verdict, rows) in fleet order."""
+        agents, f = self.agents, self.fleet
+        f.fetch(self._vehicles, full.tolist())
+        for k in full.tolist():
+            agents[k].fleet_inbound()
+        self.fleet_driver.step()
+        now, armed, whole = self.now.tolist(), f.armed.tolist(), set(full.tolist())
+        for k in np.union1d(full, hooks).tolist():
+            if k in whole:
+                agents[k].fleet_outbound()
+            else:
+                f.complete[k] = agents[k].fleet_row(now[k], armed[k])
+
     def send_reports(self) -> None:
         """Every drone's Report, from the arrays (the superiors are fixed: every drone under the ground)."""
         f = self.fleet

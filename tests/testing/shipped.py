@@ -70,6 +70,10 @@ SMALL: dict[str, tuple[list[str], Callable[[DictConfig], None] | None]] = {
 }
 
 
+# the batch ports fly their per-drone versions' small missions
+SMALL.update({f"{name}_batch": SMALL[name] for name in ("hover", "formation", "flocking")})
+
+
 def small(algo: str) -> tuple[list[str], Callable[[DictConfig], None] | None]:
     """Overrides and a config edit that fly ``algo`` on a small mission."""
     overrides, edit = SMALL.get(algo, DELIVERY if algo.startswith("delivery") else (None, None))

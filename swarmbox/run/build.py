@@ -19,6 +19,7 @@ from swarmbox.core.fleet.ground import FleetGround
 from swarmbox.core.fleet.network import FleetNetwork
 from swarmbox.core.fleet.rows import MessageRows
 from swarmbox.core.fleet.swarm import FleetSwarm
+from swarmbox.core.fleet.whole import WholeSwarm
 from swarmbox.core.ground import GroundNode
 from swarmbox.core.messages import GROUND_ID, NET_ID
 from swarmbox.core.node import CoreTiming
@@ -177,13 +178,7 @@ def build_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> Swarm:
         alg = fleet_alg or _algorithm(cfg.algo.drone, DroneAlgorithm, "drone")
         fleet_alg = alg if isinstance(alg, FleetAlgorithm) else None
         agents.append(AgentNode(i, superior=topo.superiors[i], vehicle=vehicle, algorithm=alg, **common(i)))
-    if cfg.topology.peers == "all":
-        for a in mission.drone_ids:
-            for b in mission.drone_ids:
-                if a != b:
-                    medium.subscribe(a, b)
-    elif cfg.topology.peers != "none":
-        raise ConfigError(f"topology.peers must be 'none' or 'all', got '{cfg.topology.peers}'")
+    subscribe_peers(cfg, medium, mission.drone_ids)
     event_logs = {i: recorder.node(i).appender("events") for i in mission.drone_ids}
     swarm = Swarm(time=time, tick_s=timing.tick_s, ground=ground, agents=agents, medium=medium,
                   backend=backend, event_logs=event_logs)
@@ -191,6 +186,17 @@ def build_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> Swarm:
         swarm.state_log = FleetStateLog(agents, backend, recorder, timing.state_every_ticks)
     install_faults(cfg, swarm, mission, backend, lambda stream: rng_for(seed, stream))
     return swarm
+
+
+def subscribe_peers(cfg: DictConfig, medium: Any, ids: list[int]) -> None:
+    """``topology.peers=all``: every drone subscribes to every other drone's Heartbeats."""
+    if cfg.topology.peers == "all":
+        for a in ids:
+            for b in ids:
+                if a != b:
+                    medium.subscribe(a, b)
+    elif cfg.topology.peers != "none":
+        raise ConfigError(f"topology.peers must be 'none' or 'all', got '{cfg.topology.peers}'")
 
 
 # -- the fleet core (run.core=fleet) ---------------------------------------------------------------
@@ -207,14 +213,8 @@ def refusal(cfg: DictConfig, mission: Mission) -> str:
     faults = list(selected(cfg.get("fault")))
     if faults:
         return f"faults ({', '.join(faults)})"
-    if any(s != GROUND_ID for s in topology_of(cfg, mission).superiors.values()):
-        return f"topology {cfg.topology.kind} (only every drone under the ground)"
-    if cfg.topology.peers != "none":
-        return f"topology.peers={cfg.topology.peers}"
     if cfg.network.links:
         return "network.links (per-link specs)"
-    if r.proximity_window_s:
-        return "run.proximity_window_s > 0"
     if r.monitor == "on" or r.rerun:
         return "the live monitor"
     if not hasattr(backend_class(cfg.backend), "state_into"):
@@ -261,8 +261,11 @@ def build_fleet_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> 
                     timing=timing, mission=info, params=params,
                     rng=rng_for(seed, f"algo/{node_name(node_id)}"))
 
-    ground = FleetGround(_algorithm(cfg.algo.ground, GroundAlgorithm, "ground"), ids,
-                         **common(GROUND_ID))
+    # drones under drones or peer Heartbeats: every drone ticks whole, under the object core's ground
+    whole = cfg.topology.peers != "none" or any(s != GROUND_ID for s in topo.superiors.values())
+    ground_alg = _algorithm(cfg.algo.ground, GroundAlgorithm, "ground")
+    ground = (GroundNode(ground_alg, **common(GROUND_ID)) if whole
+              else FleetGround(ground_alg, ids, **common(GROUND_ID)))
     backend = backend_of(cfg, mission, timing.tick_s, seed, recorder.root.parent)
     fleet = FleetState(ids)
     agents = []
@@ -272,9 +275,11 @@ def build_fleet_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> 
         fleet_alg = alg if isinstance(alg, FleetAlgorithm) else None
         agents.append(FleetAgent(i, fleet=fleet, k=k, superior=topo.superiors[i], vehicle=vehicle,
                                  algorithm=alg, **common(i)))
+    subscribe_peers(cfg, network, ids)
     event_logs = {i: recorder.node(i).appender("events") for i in ids}
-    swarm = FleetSwarm(fleet=fleet, network=network, rows=rows, time=time, tick_s=timing.tick_s,
-                       ground=ground, agents=agents, backend=backend, event_logs=event_logs)
+    swarm = (WholeSwarm if whole else FleetSwarm)(
+        fleet=fleet, network=network, rows=rows, time=time, tick_s=timing.tick_s, ground=ground,
+        agents=agents, backend=backend, event_logs=event_logs)
     swarm.state_log = FleetCoreStateLog(swarm, recorder, timing.state_every_ticks)
     return swarm
 

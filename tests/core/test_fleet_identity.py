@@ -157,6 +157,7 @@ def test_rq4_ci_runs_logs_equal(tmp_path, algo, seed):
 
 
 @pytest.mark.slow
+@pytest.mark.seeds
 @pytest.mark.parametrize("seed", range(2, 20))
 @pytest.mark.parametrize("algo", RQ4_ALGOS)
 def test_rq4_ci_runs_logs_equal_on_twenty_seeds(tmp_path, algo, seed):

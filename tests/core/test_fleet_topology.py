@@ -26,6 +26,8 @@ PRESETS = {
     # four drones (the formation mission's): one under the ground, the others two levels deep
     "explicit": ["topology=explicit", "topology.superiors={0: -1, 1: 0, 2: 0, 3: 1}"],
 }
+#: CPU-heavy identity checks, left out of the default run; CI runs them on their own (-m seeds)
+_HEAVY = (pytest.mark.slow, pytest.mark.seeds)
 HOMES = {preset: grid(4 if preset == "explicit" else 6) for preset in PRESETS}
 
 
@@ -47,7 +49,7 @@ def test_hover_under_every_drone_topology_logs_equal(tmp_path, preset, seed):
     assert joined["node"].str.startswith("drone_").any()   # a drone commanded a drone
 
 
-@pytest.mark.parametrize("seed", [0, *(pytest.param(s, marks=pytest.mark.slow) for s in (1, 2))])
+@pytest.mark.parametrize("seed", [0, *(pytest.param(s, marks=_HEAVY) for s in (1, 2))])
 @pytest.mark.parametrize("preset", list(PRESETS))
 def test_formation_under_every_drone_topology_logs_equal(tmp_path, preset, seed):
     """Formation: the ground's task stream beside drone-to-drone Reports and Heartbeats."""
@@ -103,6 +105,7 @@ def test_batch_ports_under_drone_topologies_log_their_per_drone_versions(tmp_pat
 
 
 @pytest.mark.slow
+@pytest.mark.seeds   # CPU-heavy identity checks: CI runs them on their own
 @pytest.mark.parametrize("algo", ["adaptive", "chevron"])
 def test_committed_missions_with_drone_superiors_logs_equal(tmp_path, algo):
     """The shipped leader-follower missions (RQ1 adaptive, RQ5 chevron): their own superiors maps."""
@@ -111,6 +114,7 @@ def test_committed_missions_with_drone_superiors_logs_equal(tmp_path, algo):
 
 
 @pytest.mark.slow
+@pytest.mark.seeds   # CPU-heavy identity checks: CI runs them on their own
 def test_peer_heartbeat_mission_logs_equal(tmp_path):
     """The network mission with ``topology.peers=all``: the algorithm reads its peers' Heartbeats."""
     manifest = assert_same_run(tmp_path, ["algo=network", "mission=network", "topology.peers=all"])

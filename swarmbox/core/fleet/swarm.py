@@ -56,7 +56,10 @@ class FleetEndWatch:
         tick = swarm.time.tick
         if self._since is None:
             self._since = tick
-        return tick - self._since >= self.settle_ticks
+        if tick - self._since < self.settle_ticks:
+            return False
+        swarm.fleet.settle(swarm.vehicles)   # the run's outcome reads every drone's last record
+        return True
 
 
 class DroneNet:
@@ -100,12 +103,15 @@ class FleetSwarm(Swarm):
         self._clocks = [a.clock for a in agents]
         t = ground.timing
         self._lost_superior = t.lost_superior_ticks
-        self._timeouts = np.array([t.timeouts_s[s.name] for s in Stage])   # by stage code
+        self._timeouts = np.zeros(len(Stage) + 1)   # by stage code (ABORT, -1: the last)
+        for s in Stage:
+            self._timeouts[int(s)] = t.timeouts_s[s.name]
         self._values = np.empty((14, fleet.n))
         self._landed = np.empty(fleet.n, dtype=bool)
         self._crashed = getattr(self.backend, "crashed", None)
         self.now = np.zeros(fleet.n)
         self._reports: tuple[np.ndarray, np.ndarray] | None = None   # see network.reports
+        self._last_tick = 1 << 62   # the run's last tick (run sets it)
         if self.fleet_driver is not None:
             for k, agent in enumerate(agents):
                 agent.net = DroneNet(network, k + 1)
@@ -130,6 +136,7 @@ class FleetSwarm(Swarm):
             if progress is not None:
                 progress(swarm)
 
+        self._last_tick = int(round(max_sim_time_s / self.tick_s))
         try:
             return super().run(max_sim_time_s, speed, hand_over)
         finally:
@@ -137,7 +144,10 @@ class FleetSwarm(Swarm):
             self.fleet.settle(self._vehicles)
 
     def done(self) -> bool:
-        return self.ground.finished and bool(self.fleet.finished.all())
+        if not (self.ground.finished and bool(self.fleet.finished.all())):
+            return False
+        self.fleet.settle(self._vehicles)   # the run's outcome reads every drone's last record
+        return True
 
     def step(self) -> None:
         t = self.time
@@ -162,6 +172,8 @@ class FleetSwarm(Swarm):
                     agent.vehicle_failed(str(ev.data.get("reason", ev.name)))
         t.tick += 1
         t.t_s = t.tick * self.tick_s
+        if t.tick >= self._last_tick:   # the time is up: the run's outcome reads every drone's record
+            self.fleet.settle(self._vehicles)
 
     # -- deliveries --------------------------------------------------------------------------------
     def deliver(self) -> None:

@@ -50,7 +50,7 @@ class FleetEndWatch:
     def over(self, swarm: FleetSwarm) -> bool:
         f = swarm.fleet
         terminal = (f.stage == TERMINATION) | (f.stage == ABORT)
-        if not (~f.link_ok | (f.landed & ~f.armed & terminal)).all():
+        if not (~f.link_ok | (f.landed & ~f.armed & terminal) | ~swarm.live).all():
             self._since = None
             return False
         tick = swarm.time.tick
@@ -112,6 +112,7 @@ class FleetSwarm(Swarm):
         self.now = np.zeros(fleet.n)
         self._reports: tuple[np.ndarray, np.ndarray] | None = None   # see network.reports
         self._last_tick = 1 << 62   # the run's last tick (run sets it)
+        self.live = np.ones(fleet.n, dtype=bool)   # not removed (a crash removes a drone's node)
         if self.fleet_driver is not None:
             for k, agent in enumerate(agents):
                 agent.net = DroneNet(network, k + 1)
@@ -142,6 +143,11 @@ class FleetSwarm(Swarm):
         finally:
             self.rows.hand_over()
             self.fleet.settle(self._vehicles)
+
+    def remove_agent(self, drone_id: int) -> None:
+        super().remove_agent(drone_id)
+        self.live[self.agents.index(self._by_id[drone_id])] = False
+        self._reports = None   # the Reports' records, for the drones left
 
     def done(self) -> bool:
         if not (self.ground.finished and bool(self.fleet.finished.all())):
@@ -216,8 +222,8 @@ class FleetSwarm(Swarm):
         loop = (stage == PREPARATION) | (stage == EXECUTION)
         watch = f.heard & ~terminal
         fires = watch & (f.sup_silent + 1 > self._lost_superior)   # the watchdog hands over or aborts
-        full = f.busy | f.sticky | (~f.link_ok & ~terminal) | fires
-        rest = ~full
+        full = (f.busy | f.sticky | (~f.link_ok & ~terminal) | fires) & self.live
+        rest = ~full & self.live
         f.sup_silent[watch & rest] += 1
         hooks = rest & loop
         rest &= ~loop
@@ -270,14 +276,17 @@ class FleetSwarm(Swarm):
     def send_reports(self) -> None:
         """Every drone's Report, from the arrays (the superiors are fixed: every drone under the ground)."""
         f = self.fleet
+        live = None if self.live.all() else np.flatnonzero(self.live)   # a removed drone sends nothing
+        agents = self.agents if live is None else [self.agents[k] for k in live.tolist()]
         if self._reports is None:
-            self._reports = self.network.reports(f.ids.tolist(), [a.superior for a in self.agents])
+            self._reports = self.network.reports([a.node_id for a in agents], [a.superior for a in agents])
         seg, rows = (x.copy() for x in self._reports)
-        data = list(map(DATA, self.agents))
-        f.seq += 1
-        seg["msg_id"], seg["t_sent"] = f.msg_id_base | f.seq, self.now
-        seg["stage"], seg["complete"] = f.stage, f.complete
-        seg["alive"] = f.stage != ABORT
-        seg["pos"], seg["vel"] = self._values[0:3].T, self._values[3:6].T
-        seg["nbytes"] = _REPORT_FIXED + np.fromiter(map(len, data), np.int32, f.n)
+        data = list(map(DATA, agents))
+        f.seq[self.live] += 1
+        pick = (lambda a: a) if live is None else (lambda a: a[..., live])
+        seg["msg_id"], seg["t_sent"] = pick(f.msg_id_base | f.seq), pick(self.now)
+        seg["stage"], seg["complete"] = pick(f.stage), pick(f.complete)
+        seg["alive"] = pick(f.stage) != ABORT
+        seg["pos"], seg["vel"] = pick(self._values[0:3]).T, pick(self._values[3:6]).T
+        seg["nbytes"] = _REPORT_FIXED + np.fromiter(map(len, data), np.int32, len(agents))
         self.network.send_reports(seg, rows, data)

@@ -47,7 +47,8 @@ class Link(NamedTuple):
     loss_prob: float = 0.0
 
 
-def each(net: FleetNetwork, rng: np.random.Generator, out: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+def each(net: FleetNetwork, rng: np.random.Generator, out: np.ndarray,
+         t: float) -> tuple[np.ndarray, np.ndarray]:
     """``(delay_s, drop reason code or NO_TEXT)`` of every message of ``out``, one after the other."""
     m = len(out)
     delay = np.empty(m)

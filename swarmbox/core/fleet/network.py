@@ -19,6 +19,10 @@ Why the results are the object core's, number for number:
 - *Rows.* A send row when sent (a Heartbeat: one row for all subscribers), a drop row in the
   network's log when lost, a receive row stamped with the receiver's clock at the arrival instant;
   per node in the order they happen, which is all the per-node log files keep.
+
+Per-link specs (``network.links``), fault hooks (``hooks``, as on SimMedium) and disconnected nodes
+(a crashed drone's) take the per-message path of :mod:`swarmbox.core.fleet.impair` for the ticks
+they are there; without them nothing is called per message.
 """
 
 from __future__ import annotations
@@ -88,6 +92,7 @@ class FleetNetwork:
         self.hooks: list[impair.Hook] = []
         self.links = dict(links or {})
         self.gone = np.zeros(len(node_ids), dtype=bool)
+        self.any_gone = False
         self.late = empty(0)   # see impair.split
 
     @property
@@ -107,6 +112,7 @@ class FleetNetwork:
     def disconnect(self, node_id: int) -> None:
         """The node goes silent (SimMedium.disconnect): nothing it sends leaves, nothing reaches it."""
         self.gone[self._index[node_id]] = True
+        self.any_gone = True
 
     # -- the Transport protocol (the object nodes' calls) ---------------------------------------
     def subscribe(self, subscriber: int, publisher: int) -> None:
@@ -127,7 +133,7 @@ class FleetNetwork:
     def send(self, msg: Any, dst: int) -> None:
         """One message to one node: its send row now, its routing with the tick's batch."""
         mtype, nbytes, sent, src = MESSAGE_TYPE_CODES[type(msg)], msg.nbytes, msg.t_sent_s, msg.src
-        if self.gone[self._index[src]]:
+        if self.any_gone and self.gone[self._index[src]]:
             return
         self.rows.one(src, (sent, self._time.tick, SEND, msg.msg_id, mtype, src, dst, nbytes, sent, NO_TEXT))
         key = self._keep(msg, 1)
@@ -143,7 +149,7 @@ class FleetNetwork:
             fan = self._fan(src)
         template, text = fan
         n = len(template)
-        if not n or self.gone[self._index[src]]:
+        if not n or (self.any_gone and self.gone[self._index[src]]):
             return
         mtype, nbytes, sent = MESSAGE_TYPE_CODES[type(msg)], msg.nbytes, msg.t_sent_s
         self.rows.one(src, (sent, self._time.tick, SEND, msg.msg_id, mtype, src, BROADCAST, nbytes, sent,
@@ -224,7 +230,7 @@ class FleetNetwork:
         out["tick"][:] = tick
         out["order"] = self._routed + np.arange(m)
         self._routed += m
-        if self.hooks or self.links or self.gone.any():   # message by message, as SimMedium._route
+        if self.hooks or self.links or self.any_gone:   # message by message, as SimMedium._route
             delay, reason = impair.each(self, self._rng, out, t)
             lost = reason != NO_TEXT
             out["arrival"] = t + delay
@@ -292,7 +298,7 @@ class FleetNetwork:
         p = self.pending
         n = int(np.searchsorted(p["arrival"], self._time.t_s + 1e-12, side="right"))
         due, self.pending = p[:n], p[n:]
-        if len(self.late) or self.gone.any():
+        if self.any_gone or len(self.late):
             due = impair.arrived(self, due)
             n = len(due)
         if not n:

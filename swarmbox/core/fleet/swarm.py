@@ -113,6 +113,7 @@ class FleetSwarm(Swarm):
         self._reports: tuple[np.ndarray, np.ndarray] | None = None   # see network.reports
         self._last_tick = 1 << 62   # the run's last tick (run sets it)
         self.live = np.ones(fleet.n, dtype=bool)   # not removed (a crash removes a drone's node)
+        self._all_live = True
         if self.fleet_driver is not None:
             for k, agent in enumerate(agents):
                 agent.net = DroneNet(network, k + 1)
@@ -147,6 +148,7 @@ class FleetSwarm(Swarm):
     def remove_agent(self, drone_id: int) -> None:
         super().remove_agent(drone_id)
         self.live[self.agents.index(self._by_id[drone_id])] = False
+        self._all_live = False
         self._reports = None   # the Reports' records, for the drones left
 
     def done(self) -> bool:
@@ -276,13 +278,16 @@ class FleetSwarm(Swarm):
     def send_reports(self) -> None:
         """Every drone's Report, from the arrays (the superiors are fixed: every drone under the ground)."""
         f = self.fleet
-        live = None if self.live.all() else np.flatnonzero(self.live)   # a removed drone sends nothing
+        live = None if self._all_live else np.flatnonzero(self.live)   # a removed drone sends nothing
         agents = self.agents if live is None else [self.agents[k] for k in live.tolist()]
         if self._reports is None:
             self._reports = self.network.reports([a.node_id for a in agents], [a.superior for a in agents])
         seg, rows = (x.copy() for x in self._reports)
         data = list(map(DATA, agents))
-        f.seq[self.live] += 1
+        if live is None:
+            f.seq += 1
+        else:
+            f.seq[live] += 1
         pick = (lambda a: a) if live is None else (lambda a: a[..., live])
         seg["msg_id"], seg["t_sent"] = pick(f.msg_id_base | f.seq), pick(self.now)
         seg["stage"], seg["complete"] = pick(f.stage), pick(f.complete)

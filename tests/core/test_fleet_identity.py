@@ -114,7 +114,7 @@ def test_proximity_alerts_logs_equal(tmp_path):
 
 
 @pytest.mark.parametrize(("override", "what"), [
-    ("fault=packet_loss", "faults (packet_loss)"),
+    ("run.monitor=on", "the live monitor"),
     ("topology=chain", "topology chain"),
     ("topology.peers=all", "topology.peers=all"),
     ("run.runtime=processes", "run.runtime=processes"),

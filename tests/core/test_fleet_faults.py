@@ -27,6 +27,8 @@ NODE = ["battery_failsafe", "clock_skew", "crash", "gps_bias", "gps_drift", "gps
         "motor_loss"]
 #: presets for an autopilot's own failure handling (MAV_CMD_INJECT_FAILURE): no simulator backend
 AUTOPILOT_ONLY = {"gps_failure"}
+#: CPU-heavy identity checks: out of the default run, in CI's seeds job (both markers: pyproject)
+HEAVY = (pytest.mark.slow, pytest.mark.seeds)
 #: a preset's overrides beyond ``fault=<preset>`` and the onset (motor loss acts on the climb)
 EXTRA = {"motor_loss": ["fault.onset_s=0.5", "fault.accel_scale=0.1"]}
 
@@ -86,8 +88,8 @@ def _fly_preset(tmp_path: Path, preset: str, seed: int, extra: list[str] | None 
 
 
 def _seeds(presets: list[str], default: tuple[int, ...]) -> list:
-    """Every preset with every seed 0-2; those not in ``default`` are slow tests."""
-    return [pytest.param(p, s, marks=() if s in default else pytest.mark.slow)
+    """Every preset with every seed 0-2; those not in ``default`` are slow (CI's seeds job)."""
+    return [pytest.param(p, s, marks=() if s in default else HEAVY)
             for p in presets for s in (0, 1, 2)]
 
 
@@ -182,6 +184,7 @@ def test_faults_with_a_batch_algorithm_logs_equal(tmp_path, preset):
 
 
 @pytest.mark.slow
+@pytest.mark.seeds
 @pytest.mark.parametrize("preset", NETWORK + NODE)
 def test_fault_presets_on_a_formation_logs_equal(tmp_path, preset):
     """Formation: the ground streams a task to every drone every tick, so faults meet task traffic."""
@@ -193,6 +196,7 @@ def test_fault_presets_on_a_formation_logs_equal(tmp_path, preset):
 
 
 @pytest.mark.slow
+@pytest.mark.seeds
 @pytest.mark.parametrize("fault", [["fault=packet_loss", "fault.targets=[-1]"],
                                    ["fault=latency", "fault.jitter_ms=30", "fault.duration_s=10"]])
 def test_faults_on_a_delivery_logs_equal(tmp_path, fault):

@@ -98,8 +98,8 @@ class FleetCoreStateLog(FleetStateLog):
 
     def refresh(self) -> None:
         super().refresh()
-        removed = [k for k, a in enumerate(self.agents) if a.removed]
-        self._rows = None if not removed else np.array([a._k for a in self._live], dtype=np.int64)
+        live = [k for k, a in enumerate(self.agents) if not a.removed]   # a crash removes one
+        self._rows = None if len(live) == len(self.agents) else np.array(live, dtype=np.int64)
 
     def __call__(self, tick: int) -> None:
         if tick % self.every:

@@ -174,6 +174,14 @@ def test_two_faults_at_once_logs_equal(tmp_path, seed):
     assert (d1["gnss_n"] - d1["true_n"]).max() > 5.0
 
 
+def test_two_drones_crash_on_a_lossy_jittery_network_logs_equal(tmp_path):
+    """Messages in flight to a crashed drone are dropped as it drops them: at hand-over, unreachable."""
+    manifest = assert_same_run(tmp_path, [*HOVER5, "network=wifi", "fault=crash", "fault.targets=[0,3]",
+                                          f"fault.onset_s={ONSET_S}", "seed=1"], grid(5))
+    assert "drones [0, 3] removed" in manifest["reason"]
+    assert _drops(tmp_path, "unreachable") > 0 and _drops(tmp_path, "loss") > 0
+
+
 @pytest.mark.parametrize("preset", ["crash", "packet_loss"])
 def test_faults_with_a_batch_algorithm_logs_equal(tmp_path, preset):
     """hover_batch on both cores: a crashed drone leaves the fleet's hooks, losses reach its inbox."""

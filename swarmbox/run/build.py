@@ -26,7 +26,6 @@ from swarmbox.core.node import CoreTiming
 from swarmbox.core.swarm import Swarm
 from swarmbox.core.topology import Topology, build
 from swarmbox.faults import install_faults
-from swarmbox.faults.install import selected
 from swarmbox.hal.safety import SafetyLimits
 from swarmbox.net.medium import LinkSpec, SimMedium
 from swarmbox.record.fleet import FleetCoreStateLog, FleetStateLog
@@ -97,16 +96,21 @@ def clock_settings(cfg: DictConfig) -> dict:
 def medium_of(cfg: DictConfig, time: TimeSource, seed: int, recorder: Recorder,
               mission: Mission) -> SimMedium:
     n = cfg.network
+    default = LinkSpec(n.latency_ms / 1e3, n.jitter_ms / 1e3, n.loss_prob)
+    return SimMedium(time, rng_for(seed, "network"), default, links_of(cfg, mission),
+                     drop_log=recorder.node(NET_ID).appender("messages"))
+
+
+def links_of(cfg: DictConfig, mission: Mission) -> dict[tuple[int, int], LinkSpec]:
+    """``network.links``: (src, dst) -> its spec (a ConfigError for an unknown node)."""
     known = {GROUND_ID, *mission.drone_ids}
     links = {}
-    for link in n.links:
+    for link in cfg.network.links:
         for end in (link.src, link.dst):
             if end not in known:
                 raise ConfigError(f"network.links: unknown node {end} (known: {sorted(known)})")
         links[(link.src, link.dst)] = LinkSpec(link.latency_ms / 1e3, link.jitter_ms / 1e3, link.loss_prob)
-    default = LinkSpec(n.latency_ms / 1e3, n.jitter_ms / 1e3, n.loss_prob)
-    return SimMedium(time, rng_for(seed, "network"), default, links,
-                     drop_log=recorder.node(NET_ID).appender("messages"))
+    return links
 
 
 def backend_class(node: DictConfig) -> type:
@@ -210,11 +214,6 @@ def refusal(cfg: DictConfig, mission: Mission) -> str:
     r = cfg.run
     if r.runtime != "single":
         return f"run.runtime={r.runtime}"
-    faults = list(selected(cfg.get("fault")))
-    if faults:
-        return f"faults ({', '.join(faults)})"
-    if cfg.network.links:
-        return "network.links (per-link specs)"
     if r.monitor == "on" or r.rerun:
         return "the live monitor"
     if not hasattr(backend_class(cfg.backend), "state_into"):
@@ -253,7 +252,7 @@ def build_fleet_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> 
     n = cfg.network
     network = FleetNetwork(time, rng_for(seed, "network"), [GROUND_ID, *ids],
                            [node_clocks[i] for i in [GROUND_ID, *ids]], rows, latency_s=n.latency_ms / 1e3,
-                           jitter_s=n.jitter_ms / 1e3, loss_prob=n.loss_prob)
+                           jitter_s=n.jitter_ms / 1e3, loss_prob=n.loss_prob, links=links_of(cfg, mission))
     info = read_only_mission(mission.info())
 
     def common(node_id: int) -> dict[str, Any]:
@@ -281,6 +280,7 @@ def build_fleet_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> 
         fleet=fleet, network=network, rows=rows, time=time, tick_s=timing.tick_s, ground=ground,
         agents=agents, backend=backend, event_logs=event_logs)
     swarm.state_log = FleetCoreStateLog(swarm, recorder, timing.state_every_ticks)
+    install_faults(cfg, swarm, mission, backend, lambda stream: rng_for(seed, stream))
     return swarm
 
 

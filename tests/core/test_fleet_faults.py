@@ -213,3 +213,25 @@ def test_faults_on_a_delivery_logs_equal(tmp_path, fault):
                                           "mission.generator.count=15", "mission.generator.half_size_m=50.0",
                                           "run.state_every_ticks=2", *fault, "fault.onset_s=5"])
     assert manifest["status"] == "ok", manifest["reason"]
+
+
+_TOPOLOGY_FAULTS = [("leader_follower", "crash"), ("chain", "partition"), ("leader_follower", "link_cut"),
+                    ("chain", "crash"), ("leader_follower", "packet_loss"), ("chain", "clock_skew")]
+
+
+@pytest.mark.parametrize(("topology", "fault"), [
+    *_TOPOLOGY_FAULTS[:2], *(pytest.param(*tf, marks=[pytest.mark.slow, pytest.mark.seeds])
+                             for tf in _TOPOLOGY_FAULTS[2:])])
+def test_faults_under_drones_commanding_drones_logs_equal(tmp_path, topology, fault):
+    """A fault on a drone that commands drones (its inferiors hand over or abort), on the fleet core's
+    whole-tick path: the same logs as the object core's."""
+    manifest = assert_same_run(tmp_path, [*HOVER, "algo.params.hover_s=8", f"topology={topology}",
+                                          f"fault={fault}", "fault.targets=[1]", "fault.onset_s=3",
+                                          "network=wifi"])
+    events = pd.read_parquet(tmp_path / "fleet" / "logs" / "ground" / "events.parquet")
+    assert f"{fault}_start" in set(events["name"]), "the fault never started"
+    inferiors = [d for d in range(manifest["n_drones"]) if d != 1 and
+                 (tmp_path / "fleet" / "logs" / f"drone_{d}" / "events.parquet").exists() and
+                 (pd.read_parquet(tmp_path / "fleet" / "logs" / f"drone_{d}" / "events.parquet")["name"]
+                  .isin(["handover", "superior_lost", "inferior_lost"]).any())]
+    assert inferiors or fault in ("packet_loss", "clock_skew"), "no drone noticed the faulty commander"

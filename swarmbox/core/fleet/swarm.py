@@ -12,14 +12,13 @@ Hooks run per drone, through each drone's own context; a batch algorithm's
 
 from __future__ import annotations
 
-import heapq
-import json
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from swarmbox.core.clock import readings
+from swarmbox.core.ending import EndWatch
 from swarmbox.core.fleet.agents import (
     ABORT,
     DATA,
@@ -39,24 +38,16 @@ from swarmbox.core.stages import Stage
 from swarmbox.core.swarm import Outcome, Swarm
 
 
-class FleetEndWatch:
-    """EndWatch over the arrays: every drone down (landed, disarmed, in TERMINATION or ABORT) or its
-    link lost, for ``settle_ticks`` (the readings are those of the last tick, as an agent's are)."""
+class FleetEndWatch(EndWatch):
+    """EndWatch over the arrays (the readings are those of the last tick, as an agent's are)."""
 
-    def __init__(self, settle_ticks: int) -> None:
-        self.settle_ticks = max(1, int(settle_ticks))
-        self._since: int | None = None
-
-    def over(self, swarm: FleetSwarm) -> bool:
+    def all_down(self, swarm: FleetSwarm) -> bool:
         f = swarm.fleet
         terminal = (f.stage == TERMINATION) | (f.stage == ABORT)
-        if not (~f.link_ok | (f.landed & ~f.armed & terminal) | ~swarm.live).all():
-            self._since = None
-            return False
-        tick = swarm.time.tick
-        if self._since is None:
-            self._since = tick
-        if tick - self._since < self.settle_ticks:
+        return bool((~f.link_ok | (f.landed & ~f.armed & terminal) | ~swarm.live).all())
+
+    def over(self, swarm: FleetSwarm) -> bool:
+        if not super().over(swarm):
             return False
         swarm.fleet.settle(swarm.vehicles)   # the run's outcome reads every drone's last record
         return True
@@ -159,8 +150,7 @@ class FleetSwarm(Swarm):
 
     def step(self) -> None:
         t = self.time
-        while self._scheduled and self._scheduled[0][0] <= t.t_s + 1e-9:
-            heapq.heappop(self._scheduled)[2](self)
+        self.run_scheduled()
         self.deliver()
         self.network.phase = 0
         self.ground.tick()
@@ -169,19 +159,14 @@ class FleetSwarm(Swarm):
         if self.state_log is not None:
             self.state_log(t.tick)
         self.backend.step(self.tick_s)
-        for ev in self.backend.drain_events():
-            log = self._event_logs.get(ev.drone_id)
-            if log is not None:
-                agent = self._by_id[ev.drone_id]
-                log((agent.clock.now(), t.tick, ev.kind, ev.name, ev.drone_id,
-                     json.dumps(ev.data, sort_keys=True, default=str)))
-                if ev.kind == "failure":   # the autopilot cannot fly the mission: the drone aborts
-                    self.fleet.settle(self._vehicles)
-                    agent.vehicle_failed(str(ev.data.get("reason", ev.name)))
+        self.vehicle_events()
         t.tick += 1
         t.t_s = t.tick * self.tick_s
         if t.tick >= self._last_tick:   # the time is up: the run's outcome reads every drone's record
             self.fleet.settle(self._vehicles)
+
+    def before_failure(self) -> None:
+        self.fleet.settle(self._vehicles)   # the failing drone's agent reads its current record
 
     # -- deliveries --------------------------------------------------------------------------------
     def deliver(self) -> None:

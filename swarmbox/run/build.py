@@ -218,11 +218,6 @@ def refusal(cfg: DictConfig, mission: Mission) -> str:
         return "the live monitor"
     if not hasattr(backend_class(cfg.backend), "state_into"):
         return f"backend {cfg.backend.get('name', '?')} (no fleet arrays)"
-    ground = cfg.algo.ground
-    if ground is not None:
-        cls = get_class(ground._target_)
-        if getattr(cls, "on_report", None) is not GroundAlgorithm.on_report:
-            return "a ground algorithm with on_report"
     return ""
 
 
@@ -260,9 +255,11 @@ def build_fleet_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> 
                     timing=timing, mission=info, params=params,
                     rng=rng_for(seed, f"algo/{node_name(node_id)}"))
 
-    # drones under drones or peer Heartbeats: every drone ticks whole, under the object core's ground
-    whole = cfg.topology.peers != "none" or any(s != GROUND_ID for s in topo.superiors.values())
+    # drones under drones, peer Heartbeats or a ground that reads each Report (on_report): every drone
+    # ticks whole, under the object core's ground
     ground_alg = _algorithm(cfg.algo.ground, GroundAlgorithm, "ground")
+    whole = (cfg.topology.peers != "none" or any(s != GROUND_ID for s in topo.superiors.values())
+             or type(ground_alg).on_report is not GroundAlgorithm.on_report)
     ground = (GroundNode(ground_alg, **common(GROUND_ID)) if whole
               else FleetGround(ground_alg, ids, **common(GROUND_ID)))
     backend = backend_of(cfg, mission, timing.tick_s, seed, recorder.root.parent)

@@ -10,6 +10,7 @@ none can pass on a run where the path under test never ran.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pandas as pd
@@ -120,3 +121,17 @@ def test_peer_heartbeat_mission_logs_equal(tmp_path):
     manifest = assert_same_run(tmp_path, ["algo=network", "mission=network", "topology.peers=all"])
     assert manifest["status"] == "ok", manifest["reason"]
 
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_ground_that_reads_every_report_logs_equal(tmp_path, seed):
+    """A ground algorithm with its own ``on_report`` (each Report handed to it, tasks sent back) runs
+    under the object core's ground on the fleet core: the same logs, its marks and tasks included."""
+    assert_same_run(tmp_path, [*HOVER, "algo.params.hover_s=4", "network=wifi", "network.loss_prob=0.1",
+                               "+algo.ground._target_=tests.core.algos.ReportWatchingGround", f"seed={seed}"],
+                    grid(5))
+    events = _events(tmp_path / "fleet")
+    seen = events[(events["node"] == "ground") & (events["name"] == "report_seen")]
+    said = [json.loads(d) for d in seen["data"]]
+    assert {d["drone"] for d in said} == set(range(5)), "on_report did not see every drone"
+    assert max(d["n"] for d in said) >= 100 and any(d["complete"] for d in said)

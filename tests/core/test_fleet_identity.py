@@ -177,3 +177,32 @@ def test_the_rq4_identity_runs_fly_the_preset():
 def test_shipped_missions_logs_equal(tmp_path, algo):
     manifest = assert_same_run(tmp_path, [f"algo={algo}"])
     assert manifest["status"] == "ok", manifest["reason"]
+
+
+#: Every committed mission and an algorithm that flies it (the algorithm's own mission unless named)
+COMMITTED_MISSIONS = {
+    "adaptive": "adaptive", "airview": "airview", "airview16": "airview", "chevron": "chevron",
+    "chevron200": "chevron", "crossing": "crossing", "delivery": "delivery_distance_dynamic",
+    "delivery16": "delivery_distance_dynamic", "delivery36": "delivery_azimuth_rr",
+    "delivery_paper": "delivery_none_block", "flocking": "flocking", "flocking200": "flocking",
+    "formation": "formation", "formation36": "formation", "formation9": "formation9", "hover": "hover",
+    "network": "network", "network200": "network", "socratic": "socratic", "tracking": "tracking",
+    "file:experiments/missions/rq2_sim2real.yaml": "formation",
+}
+
+
+def test_every_committed_mission_is_flown_on_both_cores():
+    root = Path(__file__).parents[2]
+    shipped = {p.stem for p in (root / "swarmbox/conf/mission").glob("*.yaml")}
+    shipped |= {f"file:{p.relative_to(root)}" for p in (root / "experiments/missions").glob("*.yaml")}
+    assert shipped == set(COMMITTED_MISSIONS)
+
+
+@pytest.mark.slow
+@pytest.mark.seeds
+@pytest.mark.parametrize("mission", sorted(COMMITTED_MISSIONS))
+def test_every_committed_mission_logs_equal(tmp_path, mission):
+    """Each committed mission, as its algorithm flies it, through both cores: the same logs."""
+    where = f"mission.file={mission[5:]}" if mission.startswith("file:") else f"mission={mission}"
+    manifest = assert_same_run(tmp_path, [f"algo={COMMITTED_MISSIONS[mission]}", where])
+    assert manifest["status"] in ("ok", "aborted"), manifest["reason"]

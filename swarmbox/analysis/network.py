@@ -23,6 +23,8 @@ lost after the restart comes out lost. Definitions:
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pandas as pd
 from scipy.sparse.csgraph import connected_components
@@ -139,11 +141,28 @@ def _rows(values: np.ndarray, keep: np.ndarray | None) -> np.ndarray:
     return values if keep is None else values[keep]
 
 
+def _blockwise(part: Callable[[int, int], pd.Series], rows: int, block: int) -> pd.Series:
+    """The sum, by index, of ``part(lo, hi)`` over blocks of ``block`` rows: sums of whole numbers
+    (counts, message sizes) as exact as summed at once, holding one block's grouping."""
+    parts = [part(lo, min(lo + block, rows)) for lo in range(0, max(rows, 1), block)]
+    return parts[0] if len(parts) == 1 else pd.concat(parts).groupby(level=0).sum()
+
+
 def _traffic(flow: pd.DataFrame, agents: pd.Index, span_s: float) -> pd.DataFrame:
-    """Bytes per second each of ``agents`` sent (tx) and received (rx, delivered messages only)."""
-    tx = flow["nbytes"].groupby(flow["src"]).sum().reindex(agents).fillna(0.0)
-    got = flow["delivered"].to_numpy(dtype=bool)   # only the two columns read, not a copy of the flow
-    rx = flow["nbytes"][got].groupby(flow["dst"][got]).sum().reindex(agents).fillna(0.0)
+    """Bytes per second each of ``agents`` sent (tx) and received (rx, delivered messages only); summed a
+    block of the flow at a time (sizes are whole numbers of bytes: the sums are exact either way)."""
+    nbytes, src, dst = flow["nbytes"], flow["src"], flow["dst"]
+    got = flow["delivered"].to_numpy(dtype=bool)   # only the columns read, not a copy of the flow
+
+    def sent(lo: int, hi: int) -> pd.Series:
+        return nbytes.iloc[lo:hi].groupby(src.iloc[lo:hi]).sum()
+
+    def received(lo: int, hi: int) -> pd.Series:
+        mine = got[lo:hi]
+        return nbytes.iloc[lo:hi][mine].groupby(dst.iloc[lo:hi][mine]).sum()
+
+    tx = _blockwise(sent, len(flow), windows.TOUCH_ROWS).reindex(agents).fillna(0.0)
+    rx = _blockwise(received, len(flow), windows.TOUCH_ROWS).reindex(agents).fillna(0.0)
     return pd.DataFrame({"tx_bytes_per_s": tx / span_s if span_s > 0 else np.nan,
                          "rx_bytes_per_s": rx / span_s if span_s > 0 else np.nan}, index=agents)
 
@@ -220,7 +239,8 @@ def agent_chunks(flow: pd.DataFrame, agents: list[int] | None = None, rows: int 
     rows = windows.TOUCH_ROWS if rows is None else rows
     if len(sides) * len(flow) <= rows:
         return [agents]
-    counts = pd.concat([flow[side] for side in sides], ignore_index=True).value_counts()
+    counts = _blockwise(lambda lo, hi: pd.concat([flow[side].iloc[lo:hi] for side in sides]).value_counts(),
+                        len(flow), rows)
     ids = counts.index.to_numpy()
     if agents is not None:
         ids = ids[np.isin(ids, agents)]

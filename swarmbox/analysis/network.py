@@ -92,16 +92,17 @@ def grouped_stats(frame: pd.DataFrame, keys: list[str], span_s: float) -> pd.Dat
 def link_stats(flow: pd.DataFrame, span_s: float) -> pd.DataFrame:
     """Per directed link (src, dst): counts, loss ratio, latency mean/p50/p95/max, bytes/s.
 
-    A few senders at a time (:func:`agent_chunks` by ``src``): each link is whole in its chunk, its
-    rows in the flow's order, so its numbers are those of the flow grouped at once; only a chunk's
-    rows are copied and grouped (grouping a 1,000-drone minute at once took ~0.4 GB beyond the flow)."""
-    chunks = agent_chunks(flow, sides=("src",))
+    A few links at a time (:func:`_link_chunks`, ranges of links in their order): each link is whole
+    in its chunk, its rows in the flow's order, so its numbers are those of the flow grouped at once;
+    only a chunk's rows are copied and grouped (grouping a 1,000-drone minute at once took ~0.4 GB
+    beyond the flow)."""
+    src, dst = flow["src"].to_numpy(), flow["dst"].to_numpy()
+    chunks = _link_chunks(src, dst, windows.TOUCH_ROWS)
     got = flow["delivered"].to_numpy(dtype=bool)
-    if len(chunks) > 1 and not sorted_where(got, flow["src"].to_numpy(), flow["dst"].to_numpy()):
-        src, parts = flow["src"].to_numpy(), []
-        read = ["src", "dst", "counted", "delivered", "lost", _LAT, "nbytes"]
-        for senders in chunks:
-            part = flow.loc[np.isin(src, senders), read]
+    if len(chunks) > 1 and not sorted_where(got, src, dst):
+        parts = []
+        for rows in chunks:
+            part = pd.DataFrame({c: flow[c].to_numpy()[rows] for c in _LINK_READ}, copy=False)
             mine = part["delivered"].to_numpy(dtype=bool)
             if sorted_keys(part["src"].to_numpy()[mine], part["dst"].to_numpy()[mine]):
                 break   # pandas would average this chunk another way than the whole: at once
@@ -110,6 +111,50 @@ def link_stats(flow: pd.DataFrame, span_s: float) -> pd.DataFrame:
         else:
             return pd.concat(parts).reset_index()
     return grouped_stats(flow, ["src", "dst"], span_s).reset_index()
+
+
+_LINK_READ = ("src", "dst", "counted", "delivered", "lost", _LAT, "nbytes")
+
+
+def _link_codes(src: np.ndarray, dst: np.ndarray, lo: int, hi: int, base: tuple[int, int, int]) -> np.ndarray:
+    """Rows lo:hi's links as int64 codes in (src, dst) order, -1 where an end is unknown (NaN)."""
+    s, d = src[lo:hi], dst[lo:hi]
+    known = ~(np.isnan(s) | np.isnan(d)) if s.dtype.kind == "f" or d.dtype.kind == "f" else None
+    s_min, d_min, span = base
+    if known is not None:
+        s, d = np.where(known, s, s_min), np.where(known, d, d_min)
+    code = (s.astype(np.int64) - s_min) * span + (d.astype(np.int64) - d_min)
+    return code if known is None else np.where(known, code, -1)
+
+
+def _link_chunks(src: np.ndarray, dst: np.ndarray, rows: int) -> list[np.ndarray]:
+    """The flow's row numbers of ranges of links (in (src, dst) order; two links at least each) that hold
+    at most ``rows`` rows each; none (group at once) when that many hold them all, or when the links
+    cannot be coded in 62 bits. Codes are made a block of rows at a time: no array of
+    every row's link."""
+    s_ok, d_ok = (v if v.dtype.kind != "f" else v[~np.isnan(v)] for v in (src, dst))
+    if len(src) <= rows or not len(s_ok) or not len(d_ok):
+        return []
+    base = (int(s_ok.min()), int(d_ok.min()), int(d_ok.max()) - int(d_ok.min()) + 1)
+    if (int(s_ok.max()) - base[0] + 1) * base[2] >= 2**62:
+        return []
+    counts = _blockwise(lambda lo, hi: pd.Series(_link_codes(src, dst, lo, hi, base)).value_counts(),
+                        len(src), rows).sort_index()
+    counts = counts[counts.index >= 0]
+    edges, held, links = [], 0, 0
+    for code, size in zip(counts.index.tolist(), counts.tolist(), strict=True):
+        if links >= 2 and held + size > rows:
+            edges.append(code)
+            held, links = 0, 0
+        held, links = held + size, links + 1
+    if links == 1 and edges:
+        edges.pop()   # the last link joins the chunk before it
+    bounds = [counts.index[0], *edges, counts.index[-1] + 1]
+    out = []
+    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+        out.append(np.concatenate([lo + np.flatnonzero((c >= a) & (c < b)) for lo in range(0, len(src), rows)
+                                   for c in [_link_codes(src, dst, lo, lo + rows, base)]]))
+    return out
 
 
 def touching(flow: pd.DataFrame, columns: list[str] | None = None, agents: list[int] | None = None,

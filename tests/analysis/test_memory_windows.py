@@ -149,10 +149,12 @@ def test_per_agent_metrics_a_few_agents_at_a_time(plain_run, monkeypatch):
     for chunk in chunks:   # no chunk falls back to the whole: its delivered rows are not in key order
         both = network.touching(whole.flow, ["delivered"], chunk)
         assert not network.sorted_keys(both["agent"].to_numpy()[both["delivered"].to_numpy()])
-    senders = network.agent_chunks(whole.flow, sides=("src",))      # the links'
-    assert len(senders) > 1 and all(len(c) >= 2 for c in senders)
-    for chunk in senders:
-        mine = whole.flow[whole.flow["src"].isin(chunk) & whole.flow["delivered"]]
+    links = network._link_chunks(whole.flow["src"].to_numpy(), whole.flow["dst"].to_numpy(), 500)
+    assert len(links) > 1 and sorted(np.concatenate(links)) == list(range(len(whole.flow)))   # each row once
+    for rows in links:   # the links' chunks: two links at least, never in key order
+        mine = whole.flow.iloc[rows]
+        mine = mine[mine["delivered"]]
+        assert len(mine.groupby(["src", "dst"])) >= 2
         assert not network.sorted_keys(mine["src"].to_numpy(), mine["dst"].to_numpy())
     drones = network.agent_chunks(whole.flow, whole.run.drones)   # the timeline's and the diagnosis'
     assert len(drones) > 1

@@ -275,16 +275,17 @@ def sorted_where(where: np.ndarray, *keys: np.ndarray, block: int | None = None)
     return True
 
 
-def agent_chunks(flow: pd.DataFrame, agents: list[int] | None = None, rows: int | None = None,
-                 sides: tuple[str, ...] = ("src", "dst")) -> list[list[int] | None]:
+def agent_chunks(flow: pd.DataFrame, agents: list[int] | None = None,
+                 rows: int | None = None) -> list[list[int] | None]:
     """``agents`` (default: every sender and destination) in ascending chunks that touch at most
     ``rows`` rows of the doubled flow each, but of two agents at least (one agent's rows alone are in
     order: pandas would average them another way, :func:`sorted_keys`); ``[agents]`` as given (None:
-    all) when one chunk holds them all. ``sides=("src",)``: senders, by the rows of the flow they sent."""
+    all) when one chunk holds them all. The agents' rows are counted a block of the flow at a time."""
     rows = windows.TOUCH_ROWS if rows is None else rows
-    if len(sides) * len(flow) <= rows:
+    if 2 * len(flow) <= rows:
         return [agents]
-    counts = _blockwise(lambda lo, hi: pd.concat([flow[side].iloc[lo:hi] for side in sides]).value_counts(),
+    src, dst = flow["src"], flow["dst"]
+    counts = _blockwise(lambda lo, hi: pd.concat([src.iloc[lo:hi], dst.iloc[lo:hi]]).value_counts(),
                         len(flow), rows)
     ids = counts.index.to_numpy()
     if agents is not None:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from omegaconf import open_dict
+from omegaconf import OmegaConf, open_dict
 from pandas.testing import assert_frame_equal
 
 from swarmbox.bench.hover import grid
@@ -135,17 +135,45 @@ def test_an_unknown_core_is_refused(tmp_path):
     assert not (tmp_path / "run").exists()
 
 
-RQ4_ALGOS = [f"delivery_{a}_{b}" for a in ("none", "azimuth", "distance") for b in ("block", "rr", "dynamic")]
+#: The RQ4 CI preset (conf/experiment/rq4_delivery_ci.yaml): its mission, state interval and nine algorithms
+_RQ4_CI = OmegaConf.load(Path(__file__).parents[2] / "swarmbox/conf/experiment/rq4_delivery_ci.yaml")
+RQ4_ALGOS = str(_RQ4_CI.hydra.sweeper.params.algo).split(",")
+_RQ4_OVERRIDES = ["mission=delivery", f"mission.generator.count={_RQ4_CI.mission.generator.count}",
+                  f"mission.generator.half_size_m={_RQ4_CI.mission.generator.half_size_m}",
+                  f"run.state_every_ticks={_RQ4_CI.run.state_every_ticks}"]
+
+
+def _rq4_ci_run(tmp_path: Path, algo: str, seed: int) -> None:
+    """One run of the RQ4 CI preset on both cores: reliable tasks (acknowledged, re-sent), Report
+    texts, five drones."""
+    manifest = assert_same_run(tmp_path, [f"algo={algo}", *_RQ4_OVERRIDES, f"seed={seed}"])
+    assert manifest["status"] == "ok", manifest["reason"]
 
 
 @pytest.mark.parametrize("seed", [0, 1])
 @pytest.mark.parametrize("algo", RQ4_ALGOS)
 def test_rq4_ci_runs_logs_equal(tmp_path, algo, seed):
-    """The RQ4 CI preset's runs: reliable tasks (acknowledged, re-sent), Report texts, five drones."""
-    manifest = assert_same_run(tmp_path, [f"algo={algo}", "mission=delivery", "mission.generator.count=15",
-                                          "mission.generator.half_size_m=50.0", "run.state_every_ticks=2",
-                                          f"seed={seed}"])
-    assert manifest["status"] == "ok", manifest["reason"]
+    _rq4_ci_run(tmp_path, algo, seed)
+
+
+@pytest.mark.slow
+@pytest.mark.seeds
+@pytest.mark.parametrize("seed", range(2, 20))
+@pytest.mark.parametrize("algo", RQ4_ALGOS)
+def test_rq4_ci_runs_logs_equal_on_twenty_seeds(tmp_path, algo, seed):
+    """Seeds 2-19 of the nine algorithms: with the two above, the 20 seeds of the RQ4 study."""
+    _rq4_ci_run(tmp_path, algo, seed)
+
+
+def test_the_rq4_identity_runs_fly_the_preset():
+    """The runs above are the preset's: nine delivery algorithms, its mission and its own override keys
+    (a key the preset gains and the runs above lack fails here)."""
+    assert len(RQ4_ALGOS) == 9 and all(a.startswith("delivery_") for a in RQ4_ALGOS)
+    assert sorted(_RQ4_CI) == ["defaults", "hydra", "mission", "run"]
+    assert sorted(_RQ4_CI.run) == ["progress", "state_every_ticks"]
+    assert sorted(_RQ4_CI.mission) == ["generator"]
+    assert sorted(_RQ4_CI.mission.generator) == ["count", "half_size_m"]
+    assert {"override /mission": "delivery"} in OmegaConf.to_container(_RQ4_CI.defaults)
 
 
 @pytest.mark.parametrize("algo", ["crossing", "formation9", "flocking"])

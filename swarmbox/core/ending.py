@@ -33,11 +33,14 @@ class EndWatch:
         self.settle_ticks = max(1, int(settle_ticks))
         self._since: int | None = None
 
+    def all_down(self, swarm: Any) -> bool:
+        """Every drone down (landed and disarmed in a terminal stage), removed or its link lost."""
+        return all(drone_state(agent) in ("down", "removed", "link lost") for agent in swarm.agents)
+
     def over(self, swarm: Any) -> bool:
-        for agent in swarm.agents:
-            if drone_state(agent) not in ("down", "removed", "link lost"):
-                self._since = None
-                return False
+        if not self.all_down(swarm):
+            self._since = None
+            return False
         tick = swarm.time.tick
         if self._since is None:
             self._since = tick

@@ -99,8 +99,7 @@ class Swarm:
 
     def step(self) -> None:
         t = self.time
-        while self._scheduled and self._scheduled[0][0] <= t.t_s + 1e-9:
-            heapq.heappop(self._scheduled)[2](self)
+        self.run_scheduled()
         self.medium.deliver_due()
         self.ground.tick()
         if self.fleet_driver is not None:
@@ -112,16 +111,31 @@ class Swarm:
         if self.state_log is not None:
             self.state_log(t.tick)
         self.backend.step(self.tick_s)
+        self.vehicle_events()
+        t.tick += 1
+        t.t_s = t.tick * self.tick_s
+
+    def run_scheduled(self) -> None:
+        """What is scheduled for this tick (faults' onsets and ends, restarts), in time order."""
+        t_s = self.time.t_s
+        while self._scheduled and self._scheduled[0][0] <= t_s + 1e-9:
+            heapq.heappop(self._scheduled)[2](self)
+
+    def vehicle_events(self) -> None:
+        """The backend's events of this step into their drones' event logs; a failure aborts its drone."""
+        tick = self.time.tick
         for ev in self.backend.drain_events():
             log = self._event_logs.get(ev.drone_id)
             if log is not None:
                 agent = self._by_id[ev.drone_id]
-                log((agent.clock.now(), t.tick, ev.kind, ev.name, ev.drone_id,
+                log((agent.clock.now(), tick, ev.kind, ev.name, ev.drone_id,
                      json.dumps(ev.data, sort_keys=True, default=str)))
                 if ev.kind == "failure":   # the autopilot cannot fly the mission: the drone aborts
+                    self.before_failure()
                     agent.vehicle_failed(str(ev.data.get("reason", ev.name)))
-        t.tick += 1
-        t.t_s = t.tick * self.tick_s
+
+    def before_failure(self) -> None:
+        """Hook before a failing drone's agent acts (the fleet core refreshes its records here)."""
 
     def done(self) -> bool:
         return self.ground.finished and all(a.finished for a in self.agents)

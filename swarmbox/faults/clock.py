@@ -43,7 +43,16 @@ class ClockSkew(Fault):
         at_s = env.now_s()
         for node in self._nodes():
             env.clock(node).skew(at_s, step_s=self.p.offset_s, drift_ppm=self.p.drift_ppm)
+        _clocks_changed(env)
 
     def stop(self, env: FaultEnv) -> None:
         for node in self._nodes():
             env.clock(node).resync()
+        _clocks_changed(env)
+
+
+def _clocks_changed(env: FaultEnv) -> None:
+    """Tell a network that keeps the clocks' lines as arrays (the fleet core's) to read them again."""
+    refresh = getattr(env.swarm.medium, "refresh_clocks", None)
+    if refresh is not None:
+        refresh()

@@ -96,20 +96,28 @@ class FleetCoreStateLog(FleetStateLog):
         self.fleet = swarm.fleet
         super().__init__(swarm.agents, swarm.backend, sink, every_ticks)
 
+    def refresh(self) -> None:
+        super().refresh()
+        live = [k for k, a in enumerate(self.agents) if not a.removed]   # a crash removes one
+        self._rows = None if len(live) == len(self.agents) else np.array(live, dtype=np.int64)
+
     def __call__(self, tick: int) -> None:
         if tick % self.every:
             return
-        f = self.fleet
-        n = f.n
+        f, rows = self.fleet, self._rows
+        n = len(self._live)
+        if not n:
+            return
         blocks = self._blocks if self._blocks is not None else StateBlocks(n)
         a, b = blocks.reserve(n)
         cols = blocks.columns
         blocks.nodes[a:b] = self._nodes
         readings(self._clocks, self._time.t_s, out=cols[0][a:b])
         cols[1][a:b] = tick
-        cols[2][a:b] = f.stage
-        cols[3][a:b] = f.armed
-        cols[5][a:b] = list(map(MODE_TEXT.__getitem__, f.modes))
+        modes = f.modes if rows is None else [f.modes[k] for k in rows.tolist()]
+        cols[2][a:b] = f.stage if rows is None else f.stage[rows]
+        cols[3][a:b] = f.armed if rows is None else f.armed[rows]
+        cols[5][a:b] = list(map(MODE_TEXT.__getitem__, modes))
         self.backend.state_into(blocks.values[:, a:b], cols[4][a:b], self._index)
         blocks.commit(b)
         if self._blocks is None:

@@ -19,13 +19,13 @@ from swarmbox.core.fleet.ground import FleetGround
 from swarmbox.core.fleet.network import FleetNetwork
 from swarmbox.core.fleet.rows import MessageRows
 from swarmbox.core.fleet.swarm import FleetSwarm
+from swarmbox.core.fleet.whole import WholeSwarm
 from swarmbox.core.ground import GroundNode
 from swarmbox.core.messages import GROUND_ID, NET_ID
 from swarmbox.core.node import CoreTiming
 from swarmbox.core.swarm import Swarm
 from swarmbox.core.topology import Topology, build
 from swarmbox.faults import install_faults
-from swarmbox.faults.install import selected
 from swarmbox.hal.safety import SafetyLimits
 from swarmbox.net.medium import LinkSpec, SimMedium
 from swarmbox.record.fleet import FleetCoreStateLog, FleetStateLog
@@ -96,16 +96,21 @@ def clock_settings(cfg: DictConfig) -> dict:
 def medium_of(cfg: DictConfig, time: TimeSource, seed: int, recorder: Recorder,
               mission: Mission) -> SimMedium:
     n = cfg.network
+    default = LinkSpec(n.latency_ms / 1e3, n.jitter_ms / 1e3, n.loss_prob)
+    return SimMedium(time, rng_for(seed, "network"), default, links_of(cfg, mission),
+                     drop_log=recorder.node(NET_ID).appender("messages"))
+
+
+def links_of(cfg: DictConfig, mission: Mission) -> dict[tuple[int, int], LinkSpec]:
+    """``network.links``: (src, dst) -> its spec (a ConfigError for an unknown node)."""
     known = {GROUND_ID, *mission.drone_ids}
     links = {}
-    for link in n.links:
+    for link in cfg.network.links:
         for end in (link.src, link.dst):
             if end not in known:
                 raise ConfigError(f"network.links: unknown node {end} (known: {sorted(known)})")
         links[(link.src, link.dst)] = LinkSpec(link.latency_ms / 1e3, link.jitter_ms / 1e3, link.loss_prob)
-    default = LinkSpec(n.latency_ms / 1e3, n.jitter_ms / 1e3, n.loss_prob)
-    return SimMedium(time, rng_for(seed, "network"), default, links,
-                     drop_log=recorder.node(NET_ID).appender("messages"))
+    return links
 
 
 def backend_class(node: DictConfig) -> type:
@@ -177,13 +182,7 @@ def build_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> Swarm:
         alg = fleet_alg or _algorithm(cfg.algo.drone, DroneAlgorithm, "drone")
         fleet_alg = alg if isinstance(alg, FleetAlgorithm) else None
         agents.append(AgentNode(i, superior=topo.superiors[i], vehicle=vehicle, algorithm=alg, **common(i)))
-    if cfg.topology.peers == "all":
-        for a in mission.drone_ids:
-            for b in mission.drone_ids:
-                if a != b:
-                    medium.subscribe(a, b)
-    elif cfg.topology.peers != "none":
-        raise ConfigError(f"topology.peers must be 'none' or 'all', got '{cfg.topology.peers}'")
+    subscribe_peers(cfg, medium, mission.drone_ids)
     event_logs = {i: recorder.node(i).appender("events") for i in mission.drone_ids}
     swarm = Swarm(time=time, tick_s=timing.tick_s, ground=ground, agents=agents, medium=medium,
                   backend=backend, event_logs=event_logs)
@@ -191,6 +190,17 @@ def build_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> Swarm:
         swarm.state_log = FleetStateLog(agents, backend, recorder, timing.state_every_ticks)
     install_faults(cfg, swarm, mission, backend, lambda stream: rng_for(seed, stream))
     return swarm
+
+
+def subscribe_peers(cfg: DictConfig, medium: Any, ids: list[int]) -> None:
+    """``topology.peers=all``: every drone subscribes to every other drone's Heartbeats."""
+    if cfg.topology.peers == "all":
+        for a in ids:
+            for b in ids:
+                if a != b:
+                    medium.subscribe(a, b)
+    elif cfg.topology.peers != "none":
+        raise ConfigError(f"topology.peers must be 'none' or 'all', got '{cfg.topology.peers}'")
 
 
 # -- the fleet core (run.core=fleet) ---------------------------------------------------------------
@@ -204,26 +214,10 @@ def refusal(cfg: DictConfig, mission: Mission) -> str:
     r = cfg.run
     if r.runtime != "single":
         return f"run.runtime={r.runtime}"
-    faults = list(selected(cfg.get("fault")))
-    if faults:
-        return f"faults ({', '.join(faults)})"
-    if any(s != GROUND_ID for s in topology_of(cfg, mission).superiors.values()):
-        return f"topology {cfg.topology.kind} (only every drone under the ground)"
-    if cfg.topology.peers != "none":
-        return f"topology.peers={cfg.topology.peers}"
-    if cfg.network.links:
-        return "network.links (per-link specs)"
-    if r.proximity_window_s:
-        return "run.proximity_window_s > 0"
     if r.monitor == "on" or r.rerun:
         return "the live monitor"
     if not hasattr(backend_class(cfg.backend), "state_into"):
         return f"backend {cfg.backend.get('name', '?')} (no fleet arrays)"
-    ground = cfg.algo.ground
-    if ground is not None:
-        cls = get_class(ground._target_)
-        if getattr(cls, "on_report", None) is not GroundAlgorithm.on_report:
-            return "a ground algorithm with on_report"
     return ""
 
 
@@ -253,7 +247,7 @@ def build_fleet_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> 
     n = cfg.network
     network = FleetNetwork(time, rng_for(seed, "network"), [GROUND_ID, *ids],
                            [node_clocks[i] for i in [GROUND_ID, *ids]], rows, latency_s=n.latency_ms / 1e3,
-                           jitter_s=n.jitter_ms / 1e3, loss_prob=n.loss_prob)
+                           jitter_s=n.jitter_ms / 1e3, loss_prob=n.loss_prob, links=links_of(cfg, mission))
     info = read_only_mission(mission.info())
 
     def common(node_id: int) -> dict[str, Any]:
@@ -261,8 +255,13 @@ def build_fleet_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> 
                     timing=timing, mission=info, params=params,
                     rng=rng_for(seed, f"algo/{node_name(node_id)}"))
 
-    ground = FleetGround(_algorithm(cfg.algo.ground, GroundAlgorithm, "ground"), ids,
-                         **common(GROUND_ID))
+    # drones under drones, peer Heartbeats or a ground that reads each Report (on_report): every drone
+    # ticks whole, under the object core's ground
+    ground_alg = _algorithm(cfg.algo.ground, GroundAlgorithm, "ground")
+    whole = (cfg.topology.peers != "none" or any(s != GROUND_ID for s in topo.superiors.values())
+             or type(ground_alg).on_report is not GroundAlgorithm.on_report)
+    ground = (GroundNode(ground_alg, **common(GROUND_ID)) if whole
+              else FleetGround(ground_alg, ids, **common(GROUND_ID)))
     backend = backend_of(cfg, mission, timing.tick_s, seed, recorder.root.parent)
     fleet = FleetState(ids)
     agents = []
@@ -272,10 +271,13 @@ def build_fleet_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> 
         fleet_alg = alg if isinstance(alg, FleetAlgorithm) else None
         agents.append(FleetAgent(i, fleet=fleet, k=k, superior=topo.superiors[i], vehicle=vehicle,
                                  algorithm=alg, **common(i)))
+    subscribe_peers(cfg, network, ids)
     event_logs = {i: recorder.node(i).appender("events") for i in ids}
-    swarm = FleetSwarm(fleet=fleet, network=network, rows=rows, time=time, tick_s=timing.tick_s,
-                       ground=ground, agents=agents, backend=backend, event_logs=event_logs)
+    swarm = (WholeSwarm if whole else FleetSwarm)(
+        fleet=fleet, network=network, rows=rows, time=time, tick_s=timing.tick_s, ground=ground,
+        agents=agents, backend=backend, event_logs=event_logs)
     swarm.state_log = FleetCoreStateLog(swarm, recorder, timing.state_every_ticks)
+    install_faults(cfg, swarm, mission, backend, lambda stream: rng_for(seed, stream))
     return swarm
 
 

@@ -105,3 +105,16 @@ class ProximityDrone(HoverHere):
         if ctx.tick % 40 == 0:
             ctx.mark("near", ids=sorted(d.drone_id for d in ctx.proximity))
         return super().exec_loop(ctx)
+
+
+class ReportWatchingGround(GroundAlgorithm):
+    """Reacts to its inferiors' Reports (``on_report``): marks every 25th Report of each drone with what
+    it said, and sends the drone a numbered task each time."""
+
+    def on_report(self, ctx, report):
+        seen = self.__dict__.setdefault("seen", {})
+        seen[report.id] = seen.get(report.id, 0) + 1
+        if seen[report.id] % 25 == 0:
+            ctx.mark("report_seen", drone=report.id, n=seen[report.id], stage=str(report.stage),
+                     complete=report.complete, pos=[round(x, 6) for x in report.pos_ned_m])
+            ctx.send_task(report.id, code=seen[report.id])

@@ -114,11 +114,8 @@ def test_proximity_alerts_logs_equal(tmp_path):
 
 
 @pytest.mark.parametrize(("override", "what"), [
-    ("fault=packet_loss", "faults (packet_loss)"),
-    ("topology=chain", "topology chain"),
-    ("topology.peers=all", "topology.peers=all"),
+    ("run.monitor=on", "the live monitor"),
     ("run.runtime=processes", "run.runtime=processes"),
-    ("run.proximity_window_s=1.0", "run.proximity_window_s"),
 ])
 def test_what_the_fleet_core_does_not_cover_is_refused_before_anything_is_written(tmp_path, override, what):
     cfg, choices = compose_config([*HOVER, override, "run.core=fleet", "run.progress=false"])

@@ -61,6 +61,9 @@ class FleetState:
         self.link_ok = np.ones(n, dtype=bool)
         self.modes: list[Any] = []
         self.tick_read = 0                           # readings so far
+        #: every drone ticks whole, as on the object core (drones under drones, peer Heartbeats):
+        #: each publishes its own Heartbeat and Report and re-sends its own tasks
+        self.whole = False
         self.fetched = np.zeros(n, dtype=np.int64)   # the reading each record in ``tels`` is from
 
     def read(self, vehicles: list[Any], landed: np.ndarray, crashed: bool) -> None:
@@ -160,12 +163,18 @@ class FleetAgent(AgentNode):
             self._sup_silent += 1
             if self._sup_silent > self._lost_superior_ticks:
                 self._hand_over("silent")
+        if self.inferiors:   # a superior drone (only when the fleet ticks whole)
+            self.age_inferiors()
 
     def fleet_outbound(self) -> None:
         """The outbound half of :meth:`fleet_tick`: stage work (hooks, setpoint) and completion."""
         tel = self.telemetry
         now = self.clock.now()
         self.complete = self._stage_work(tel, now)
+        if self._fleet.whole:   # its own Heartbeat and Report (none sent in the fleet's batch)
+            self._publish(tel, now)
+            if self.outbox.pending:
+                self.retry_tasks()
         if self.stage in TERMINAL and (not tel.armed or self.stage_timed_out()):
             self.finished = True
         # held reliable tasks or a proximity alert in force: the inbox is drained every tick

@@ -222,8 +222,13 @@ class FleetGround(GroundNode):
         return True
 
     def _proximity_alerts(self) -> None:
-        """The object core's alerts, run only when some pair may be close or an episode is open."""
+        """The object core's alerts, run only when some pair may be close or an episode is open.
+        With a look-ahead (``proximity_window_s`` > 0) the tracker runs every tick, as on the object
+        core: it differences each tick's reported positions into the velocities it predicts with."""
+        tracker = self.proximity
+        if self.prox_pairs or tracker.active or tracker.window_s > 0:
+            super()._proximity_alerts()
+            return
         alive = np.flatnonzero(self.alive)
-        if self.prox_pairs or self.proximity.active or self._near.maybe(self.rep_pos[alive], alive,
-                                                                         self.proximity.distance_m):
+        if self._near.maybe(self.rep_pos[alive], alive, tracker.distance_m):
             super()._proximity_alerts()

@@ -19,6 +19,10 @@ Why the results are the object core's, number for number:
 - *Rows.* A send row when sent (a Heartbeat: one row for all subscribers), a drop row in the
   network's log when lost, a receive row stamped with the receiver's clock at the arrival instant;
   per node in the order they happen, which is all the per-node log files keep.
+
+Per-link specs (``network.links``), fault hooks (``hooks``, as on SimMedium) and disconnected nodes
+(a crashed drone's) take the per-message path of :mod:`swarmbox.core.fleet.impair` for the ticks
+they are there; without them nothing is called per message.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from swarmbox.core.clock import NodeClock, TimeSource
+from swarmbox.core.fleet import impair
 from swarmbox.core.fleet.rows import MESSAGE_ROW, MessageRows, concat, take
 from swarmbox.core.messages import BROADCAST, MESSAGE_TYPE_CODES, NET_ID, Heartbeat, Report, broadcast_dsts
 from swarmbox.core.rows import DROP, NO_TEXT, RECV, SEND, TEXTS
@@ -62,13 +67,13 @@ class FleetNetwork:
 
     def __init__(self, time: TimeSource, rng: np.random.Generator, node_ids: list[int],
                  clocks: list[NodeClock], rows: MessageRows, *, latency_s: float = 0.0,
-                 jitter_s: float = 0.0, loss_prob: float = 0.0) -> None:
+                 jitter_s: float = 0.0, loss_prob: float = 0.0,
+                 links: dict[tuple[int, int], impair.Link] | None = None) -> None:
         self._time, self._rng, self.rows = time, rng, rows
         self.ids = np.array(node_ids, dtype=np.int16)
         self._index = {node: k for k, node in enumerate(node_ids)}
-        # the clocks' lines, fixed for the run (a clock fault, which changes them, is not covered)
-        self._scale = np.array([c._scale for c in clocks])
-        self._offset = np.array([c._offset_s for c in clocks])
+        self._clocks = clocks
+        self.refresh_clocks()
         self.latency_s, self.jitter_s, self.loss_prob = latency_s, jitter_s, loss_prob
         self._draws = (jitter_s > 0) + (loss_prob > 0)   # uniforms per message (none: ideal network)
         self._subscribers: dict[int, list[int]] = {}
@@ -82,6 +87,32 @@ class FleetNetwork:
         self.phase = 0                        # 0: the ground's turn; k + 1: drone k's
         self._counter = 0                     # send order within a phase
         self.pending = empty(0)
+        #: fault hooks (:attr:`swarmbox.net.medium.SimMedium.hooks`), per-link specs and disconnected
+        #: nodes: with any of them a tick's messages are impaired one by one (:mod:`.impair`)
+        self.hooks: list[impair.Hook] = []
+        self.links = dict(links or {})
+        self.gone = np.zeros(len(node_ids), dtype=bool)
+        self.any_gone = False
+        self.late = empty(0)   # see impair.split
+
+    @property
+    def time(self) -> TimeSource:
+        return self._time
+
+    @property
+    def kept(self) -> dict[int, list]:
+        """The message objects in flight: key -> [message, destinations still to hand over]."""
+        return self._objects
+
+    def refresh_clocks(self) -> None:
+        """Read the nodes' clock lines again (at the start, and when a clock fault skews one)."""
+        self._scale = np.array([c._scale for c in self._clocks])
+        self._offset = np.array([c._offset_s for c in self._clocks])
+
+    def disconnect(self, node_id: int) -> None:
+        """The node goes silent (SimMedium.disconnect): nothing it sends leaves, nothing reaches it."""
+        self.gone[self._index[node_id]] = True
+        self.any_gone = True
 
     # -- the Transport protocol (the object nodes' calls) ---------------------------------------
     def subscribe(self, subscriber: int, publisher: int) -> None:
@@ -102,6 +133,8 @@ class FleetNetwork:
     def send(self, msg: Any, dst: int) -> None:
         """One message to one node: its send row now, its routing with the tick's batch."""
         mtype, nbytes, sent, src = MESSAGE_TYPE_CODES[type(msg)], msg.nbytes, msg.t_sent_s, msg.src
+        if self.any_gone and self.gone[self._index[src]]:
+            return
         self.rows.one(src, (sent, self._time.tick, SEND, msg.msg_id, mtype, src, dst, nbytes, sent, NO_TEXT))
         key = self._keep(msg, 1)
         self._singles.append((self.phase, self._counter, src, self._index[src], dst, self._index[dst],
@@ -116,7 +149,7 @@ class FleetNetwork:
             fan = self._fan(src)
         template, text = fan
         n = len(template)
-        if not n:
+        if not n or (self.any_gone and self.gone[self._index[src]]):
             return
         mtype, nbytes, sent = MESSAGE_TYPE_CODES[type(msg)], msg.nbytes, msg.t_sent_s
         self.rows.one(src, (sent, self._time.tick, SEND, msg.msg_id, mtype, src, BROADCAST, nbytes, sent,
@@ -194,6 +227,18 @@ class FleetNetwork:
                 out = take(out, np.lexsort((order, phase)))
         m = len(out)
         t, tick = self._time.t_s, self._time.tick
+        out["tick"][:] = tick
+        out["order"] = self._routed + np.arange(m)
+        self._routed += m
+        if self.hooks or self.links or self.any_gone:   # message by message, as SimMedium._route
+            delay, reason = impair.each(self, self._rng, out, t)
+            lost = reason != NO_TEXT
+            out["arrival"] = t + delay
+            if lost.any():
+                self._drop(out, lost, t, tick, reason[lost])
+                out, delay = take(out, ~lost), delay[~lost]
+            self._enqueue(*impair.split(self, out, delay))
+            return
         delay = np.full(m, self.latency_s)
         lost = np.zeros(m, dtype=bool)
         if self._draws:
@@ -202,20 +247,17 @@ class FleetNetwork:
                 delay = self.latency_s + self.jitter_s * u[:, 0]
             if self.loss_prob:
                 lost = u[:, -1] < self.loss_prob
-        out["tick"][:] = tick
-        out["order"] = self._routed + np.arange(m)
-        self._routed += m
         out["arrival"] = t + delay
         if lost.any():
-            self._drop(out, lost, t, tick)
+            self._drop(out, lost, t, tick, _LOSS)
             out = take(out, ~lost)
         self._enqueue(out)
 
-    def _drop(self, out: np.ndarray, lost: np.ndarray, t: float, tick: int) -> None:
+    def _drop(self, out: np.ndarray, lost: np.ndarray, t: Any, tick: int, reason: Any) -> None:
         self.rows.block(NET_ID, {"t_s": t, "tick": tick, "kind": DROP, "msg_id": out["msg_id"][lost],
                                  "type": out["mtype"][lost], "src": out["src"][lost], "dst": out["dst"][lost],
                                  "nbytes": out["nbytes"][lost], "t_sent_s": out["t_sent"][lost],
-                                 "reason": _LOSS}, int(lost.sum()))
+                                 "reason": reason}, int(lost.sum()))
         self._forget(out["obj"][lost])
         self._forget(out["data"][lost])
 
@@ -241,11 +283,14 @@ class FleetNetwork:
             if not entry[1]:
                 del self._objects[key]
 
-    def _enqueue(self, out: np.ndarray) -> None:
+    def _enqueue(self, out: np.ndarray, late: np.ndarray | None = None) -> None:
         both = join([self.pending, out]) if len(self.pending) else out
         if self.jitter_s:   # the heap's order: arrival, then send tick, then send order
             both = take(both, np.lexsort((both["order"], both["tick"], both["arrival"])))
         self.pending = both
+        if late is not None and len(late):
+            both = join([self.late, late]) if len(self.late) else late
+            self.late = take(both, np.lexsort((both["order"], both["tick"], both["arrival"])))
 
     def deliver(self) -> np.ndarray:
         """Every message that has arrived by now, in hand-over order, with its receive row logged;
@@ -253,6 +298,9 @@ class FleetNetwork:
         p = self.pending
         n = int(np.searchsorted(p["arrival"], self._time.t_s + 1e-12, side="right"))
         due, self.pending = p[:n], p[n:]
+        if self.any_gone or len(self.late):
+            due = impair.arrived(self, due)
+            n = len(due)
         if not n:
             return due
         dsti = due["dsti"]   # the receiver's clock at the arrival instant (NodeClock.at, the same arithmetic)

@@ -12,14 +12,13 @@ Hooks run per drone, through each drone's own context; a batch algorithm's
 
 from __future__ import annotations
 
-import heapq
-import json
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from swarmbox.core.clock import readings
+from swarmbox.core.ending import EndWatch
 from swarmbox.core.fleet.agents import (
     ABORT,
     DATA,
@@ -39,24 +38,19 @@ from swarmbox.core.stages import Stage
 from swarmbox.core.swarm import Outcome, Swarm
 
 
-class FleetEndWatch:
-    """EndWatch over the arrays: every drone down (landed, disarmed, in TERMINATION or ABORT) or its
-    link lost, for ``settle_ticks`` (the readings are those of the last tick, as an agent's are)."""
+class FleetEndWatch(EndWatch):
+    """EndWatch over the arrays (the readings are those of the last tick, as an agent's are)."""
 
-    def __init__(self, settle_ticks: int) -> None:
-        self.settle_ticks = max(1, int(settle_ticks))
-        self._since: int | None = None
-
-    def over(self, swarm: FleetSwarm) -> bool:
+    def all_down(self, swarm: FleetSwarm) -> bool:
         f = swarm.fleet
         terminal = (f.stage == TERMINATION) | (f.stage == ABORT)
-        if not (~f.link_ok | (f.landed & ~f.armed & terminal)).all():
-            self._since = None
+        return bool((~f.link_ok | (f.landed & ~f.armed & terminal) | ~swarm.live).all())
+
+    def over(self, swarm: FleetSwarm) -> bool:
+        if not super().over(swarm):
             return False
-        tick = swarm.time.tick
-        if self._since is None:
-            self._since = tick
-        return tick - self._since >= self.settle_ticks
+        swarm.fleet.settle(swarm.vehicles)   # the run's outcome reads every drone's last record
+        return True
 
 
 class DroneNet:
@@ -100,12 +94,17 @@ class FleetSwarm(Swarm):
         self._clocks = [a.clock for a in agents]
         t = ground.timing
         self._lost_superior = t.lost_superior_ticks
-        self._timeouts = np.array([t.timeouts_s[s.name] for s in Stage])   # by stage code
+        self._timeouts = np.zeros(len(Stage) + 1)   # by stage code (ABORT, -1: the last)
+        for s in Stage:
+            self._timeouts[int(s)] = t.timeouts_s[s.name]
         self._values = np.empty((14, fleet.n))
         self._landed = np.empty(fleet.n, dtype=bool)
         self._crashed = getattr(self.backend, "crashed", None)
         self.now = np.zeros(fleet.n)
         self._reports: tuple[np.ndarray, np.ndarray] | None = None   # see network.reports
+        self._last_tick = 1 << 62   # the run's last tick (run sets it)
+        self.live = np.ones(fleet.n, dtype=bool)   # not removed (a crash removes a drone's node)
+        self._all_live = True
         if self.fleet_driver is not None:
             for k, agent in enumerate(agents):
                 agent.net = DroneNet(network, k + 1)
@@ -130,19 +129,28 @@ class FleetSwarm(Swarm):
             if progress is not None:
                 progress(swarm)
 
+        self._last_tick = int(round(max_sim_time_s / self.tick_s))
         try:
             return super().run(max_sim_time_s, speed, hand_over)
         finally:
             self.rows.hand_over()
             self.fleet.settle(self._vehicles)
 
+    def remove_agent(self, drone_id: int) -> None:
+        super().remove_agent(drone_id)
+        self.live[self.agents.index(self._by_id[drone_id])] = False
+        self._all_live = False
+        self._reports = None   # the Reports' records, for the drones left
+
     def done(self) -> bool:
-        return self.ground.finished and bool(self.fleet.finished.all())
+        if not (self.ground.finished and bool(self.fleet.finished.all())):
+            return False
+        self.fleet.settle(self._vehicles)   # the run's outcome reads every drone's last record
+        return True
 
     def step(self) -> None:
         t = self.time
-        while self._scheduled and self._scheduled[0][0] <= t.t_s + 1e-9:
-            heapq.heappop(self._scheduled)[2](self)
+        self.run_scheduled()
         self.deliver()
         self.network.phase = 0
         self.ground.tick()
@@ -151,17 +159,14 @@ class FleetSwarm(Swarm):
         if self.state_log is not None:
             self.state_log(t.tick)
         self.backend.step(self.tick_s)
-        for ev in self.backend.drain_events():
-            log = self._event_logs.get(ev.drone_id)
-            if log is not None:
-                agent = self._by_id[ev.drone_id]
-                log((agent.clock.now(), t.tick, ev.kind, ev.name, ev.drone_id,
-                     json.dumps(ev.data, sort_keys=True, default=str)))
-                if ev.kind == "failure":   # the autopilot cannot fly the mission: the drone aborts
-                    self.fleet.settle(self._vehicles)
-                    agent.vehicle_failed(str(ev.data.get("reason", ev.name)))
+        self.vehicle_events()
         t.tick += 1
         t.t_s = t.tick * self.tick_s
+        if t.tick >= self._last_tick:   # the time is up: the run's outcome reads every drone's record
+            self.fleet.settle(self._vehicles)
+
+    def before_failure(self) -> None:
+        self.fleet.settle(self._vehicles)   # the failing drone's agent reads its current record
 
     # -- deliveries --------------------------------------------------------------------------------
     def deliver(self) -> None:
@@ -204,8 +209,8 @@ class FleetSwarm(Swarm):
         loop = (stage == PREPARATION) | (stage == EXECUTION)
         watch = f.heard & ~terminal
         fires = watch & (f.sup_silent + 1 > self._lost_superior)   # the watchdog hands over or aborts
-        full = f.busy | f.sticky | (~f.link_ok & ~terminal) | fires
-        rest = ~full
+        full = (f.busy | f.sticky | (~f.link_ok & ~terminal) | fires) & self.live
+        rest = ~full & self.live
         f.sup_silent[watch & rest] += 1
         hooks = rest & loop
         rest &= ~loop
@@ -258,14 +263,20 @@ class FleetSwarm(Swarm):
     def send_reports(self) -> None:
         """Every drone's Report, from the arrays (the superiors are fixed: every drone under the ground)."""
         f = self.fleet
+        live = None if self._all_live else np.flatnonzero(self.live)   # a removed drone sends nothing
+        agents = self.agents if live is None else [self.agents[k] for k in live.tolist()]
         if self._reports is None:
-            self._reports = self.network.reports(f.ids.tolist(), [a.superior for a in self.agents])
+            self._reports = self.network.reports([a.node_id for a in agents], [a.superior for a in agents])
         seg, rows = (x.copy() for x in self._reports)
-        data = list(map(DATA, self.agents))
-        f.seq += 1
-        seg["msg_id"], seg["t_sent"] = f.msg_id_base | f.seq, self.now
-        seg["stage"], seg["complete"] = f.stage, f.complete
-        seg["alive"] = f.stage != ABORT
-        seg["pos"], seg["vel"] = self._values[0:3].T, self._values[3:6].T
-        seg["nbytes"] = _REPORT_FIXED + np.fromiter(map(len, data), np.int32, f.n)
+        data = list(map(DATA, agents))
+        if live is None:
+            f.seq += 1
+        else:
+            f.seq[live] += 1
+        pick = (lambda a: a) if live is None else (lambda a: a[..., live])
+        seg["msg_id"], seg["t_sent"] = pick(f.msg_id_base | f.seq), pick(self.now)
+        seg["stage"], seg["complete"] = pick(f.stage), pick(f.complete)
+        seg["alive"] = pick(f.stage) != ABORT
+        seg["pos"], seg["vel"] = pick(self._values[0:3]).T, pick(self._values[3:6]).T
+        seg["nbytes"] = _REPORT_FIXED + np.fromiter(map(len, data), np.int32, len(agents))
         self.network.send_reports(seg, rows, data)

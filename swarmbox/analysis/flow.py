@@ -345,22 +345,39 @@ def finish_flow(sends: dict[str, np.ndarray], logged: np.ndarray, t_end: float,
                 tick_s: float) -> pd.DataFrame:
     """The flow of :func:`matched_sends`'s sends: latency, delivered, and which are counted (not in
     flight at ``t_end``, the last message record, to a destination among the ``logged`` nodes)."""
-    src, s_known, dst, d_known = sends["src"], sends["s_known"], sends["dst"], sends["d_known"]
+    lat = (sends["t_recv"] - sends["t_send"]) * 1e3
+    link_max_s = _link_max_latency_s(sends["src"], sends["dst"], sends["s_known"] & sends["d_known"], lat)
+    return flow_frame(finished(sends, link_max_s, logged, t_end, tick_s), sends)
+
+
+def finished(sends: dict[str, np.ndarray], link_max_s: np.ndarray, logged: np.ndarray, t_end: float,
+             tick_s: float) -> dict[str, np.ndarray]:
+    """The flow's columns of ``sends``, row by row, given each row's largest latency on its link over the
+    whole flow (``link_max_s``): text as codes (``type``, ``reason``), integers as int64 with their masks."""
+    dst, d_known = sends["dst"], sends["d_known"]
     t_send, t_recv, reason = sends["t_send"], sends["t_recv"], sends["reason"]
     lat = (t_recv - t_send) * 1e3
     delivered = ~np.isnan(t_recv)
     margin = tick_s if np.isfinite(tick_s) else 0.0
-    limit = t_end - _link_max_latency_s(src, dst, s_known & d_known, lat) - margin
+    limit = t_end - link_max_s - margin
     with np.errstate(invalid="ignore"):
         late = t_send > limit
     in_flight = ~delivered & (reason < 0) & late
     counted = np.isin(dst, logged) & d_known & ~in_flight
-    columns = {"msg_id": _as_column(sends["msg_id"], sends["m_known"])}
-    if "type" in sends:
-        columns["type"] = _text(sends["type"], sends["type_words"])
+    kept = ("msg_id", "m_known", "src", "s_known", "dst", "d_known", "nbytes", "t_send", "t_recv", "reason")
+    out = {name: sends[name] for name in (*kept, *(("type",) if "type" in sends else ()))}
+    return out | {LAT: lat, "delivered": delivered, "counted": counted, "lost": counted & ~delivered}
+
+
+def flow_frame(columns: dict[str, np.ndarray], words: dict[str, pa.Array]) -> pd.DataFrame:
+    """The flow as a frame from :func:`finished`'s columns (``words``: ``type_words``, ``reason_words``)."""
+    first = {"msg_id": _as_column(columns["msg_id"], columns["m_known"])}
+    if "type" in columns:
+        first["type"] = _text(columns["type"], words["type_words"])
     return pd.DataFrame({
-        **columns, "src": _as_column(src, s_known), "dst": _as_column(dst, d_known),
-        "nbytes": sends["nbytes"], "t_send": t_send, "t_recv": t_recv,
-        "drop_reason": _text(reason, sends["reason_words"]), LAT: lat, "delivered": delivered,
-        "counted": counted, "lost": counted & ~delivered,
+        **first, "src": _as_column(columns["src"], columns["s_known"]),
+        "dst": _as_column(columns["dst"], columns["d_known"]), "nbytes": columns["nbytes"],
+        "t_send": columns["t_send"], "t_recv": columns["t_recv"],
+        "drop_reason": _text(columns["reason"], words["reason_words"]), LAT: columns[LAT],
+        "delivered": columns["delivered"], "counted": columns["counted"], "lost": columns["lost"],
     }, copy=False)

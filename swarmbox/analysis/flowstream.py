@@ -199,9 +199,57 @@ def message_flow(parts: Partitions, tick_s: float, max_latency_s: float,
         own = np.concatenate([np.full(len(t), j == k) for j, t in zip(near, tables, strict=True)])
         pieces.append(flow.matched_sends(_frame(parts, tables), slack_s, max_latency_s, np.inf, own))
     held.clear()
-    sends = _joined(parts, pieces)
     logged = np.sort(np.array(sorted(parts.logged), dtype=np.int64))
-    return flow.finish_flow(sends, logged, parts.t_max, tick_s)
+    return _finish(parts, pieces, logged, parts.t_max, tick_s)
+
+
+def _finish(parts: Partitions, pieces: list[dict[str, np.ndarray]], logged: np.ndarray, t_end: float,
+            tick_s: float) -> pd.DataFrame:
+    """:func:`~.flow.finish_flow` of the pieces joined, without joining them: each row's link maximum
+    over every piece first, then the pieces finished one by one into the flow's columns, each freed once
+    copied. What is held is the flow and the pieces not yet copied (smaller than their rows of the
+    flow), where joining then finishing held the pieces' join and the finished columns at once."""
+    if not any(len(p["t_send"]) for p in pieces):
+        return flow.finish_flow(_joined(parts, pieces), logged, t_end, tick_s)
+    link_max = _link_max_s(pieces)
+    rows = sum(len(p["t_send"]) for p in pieces)
+    out: dict[str, np.ndarray] = {}
+    at = 0
+    for i, most in enumerate(link_max):
+        piece, pieces[i], link_max[i] = pieces[i], {}, np.zeros(0)   # the lists let go of the piece
+        columns = flow.finished(piece, most, logged, t_end, tick_s)
+        del piece, most
+        for name, values in columns.items():
+            if name not in out:
+                out[name] = np.empty(rows, dtype=values.dtype)
+            out[name][at:at + len(values)] = values
+        at += len(columns["t_send"])
+        del columns
+        _give_back()   # the piece's arrays were below the allocator's mapping threshold: kept, not returned
+    return flow.flow_frame(out, _words(parts))
+
+
+def _link_max_s(pieces: list[dict[str, np.ndarray]]) -> list[np.ndarray]:
+    """Per piece and row: the largest latency of the row's link (src, dst) over every piece, in s; 0 for
+    a link with no latency or a row with an unknown end (``flow._link_max_latency_s`` of the join)."""
+    known = [p["s_known"] & p["d_known"] for p in pieces]
+    keys = flow.pair_keys([(p["src"][k], p["dst"][k]) for p, k in zip(pieces, known, strict=True)])
+    tops = []
+    for p, k, key in zip(pieces, known, keys, strict=True):
+        lat = ((p["t_recv"] - p["t_send"]) * 1e3)[k]
+        tops.append(pd.Series(lat, index=key).groupby(level=0).max())   # NaN: a link with no latency
+    best = pd.concat(tops).groupby(level=0).max()
+    out = []
+    for k, key in zip(known, keys, strict=True):
+        per_row = np.zeros(len(k))
+        per_row[k] = np.nan_to_num(best.to_numpy()[best.index.get_indexer(key)], nan=0.0)
+        out.append(per_row / 1e3)
+    return out
+
+
+def _words(parts: Partitions) -> dict[str, pa.Array]:
+    return {"type_words": pa.array(list(parts.words["type"]) or [""], pa.string()),
+            "reason_words": pa.array(list(parts.words["reason"]) or [""], pa.string())}
 
 
 def _within(table: pa.Table, lo: float, hi: float) -> pa.Table:
@@ -211,8 +259,7 @@ def _within(table: pa.Table, lo: float, hi: float) -> pa.Table:
 
 
 def _joined(parts: Partitions, pieces: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-    words = {"type_words": pa.array(list(parts.words["type"]) or [""], pa.string()),
-             "reason_words": pa.array(list(parts.words["reason"]) or [""], pa.string())}
+    words = _words(parts)
     if not pieces:
         empty = {"msg_id": np.zeros(0, np.int64), "m_known": np.zeros(0, bool), "dst": np.zeros(0, np.int64),
                  "d_known": np.zeros(0, bool), "t_send": np.zeros(0), "t_recv": np.zeros(0),

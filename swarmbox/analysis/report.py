@@ -23,18 +23,19 @@ from swarmbox.analysis.timeline import drone_timeline
 from swarmbox.analysis.unify import ClockOptions, T, unify
 
 #: The columns a run analysis reads, for tables it does not read whole (``load_run(columns=...)``):
-#: the setpoints only bound the run's time span and the messages' tick is never used. At 1,000 drones
-#: the rest of those tables is about 300 MB that would be loaded for nothing.
+#: the setpoints only bound the run's time span and the messages' tick is never used; of the state,
+#: time, tick and the positions and velocities (its stage, mode, flags, yaw and battery feed no table
+#: and no figure: about a fifth of the state's memory). At 1,000 drones the rest of those tables is
+#: about 300 MB a minute that would be loaded for nothing.
 ANALYZED_COLUMNS: dict[str, tuple[str, ...]] = {
     "setpoints": ("t_s",),
-    "messages": ("t_s", "kind", "msg_id", "type", "src", "dst", "nbytes", "t_sent_s", "reason"),
-}
-#: What the scalars alone read (a sweep): of the state, time, tick and the positions and velocities (its
-#: stage, mode, flags, yaw and battery feed no scalar); of the messages, all but the type.
-SCALAR_COLUMNS: dict[str, tuple[str, ...]] = {
-    **ANALYZED_COLUMNS,
     "state": ("t_s", "tick", *(f"{kind}_{axis}" for kind in ("pos", "vel", "gnss", "true")
                                for axis in "ned")),
+    "messages": ("t_s", "kind", "msg_id", "type", "src", "dst", "nbytes", "t_sent_s", "reason"),
+}
+#: What the scalars alone read (a sweep): of the messages, all but the type.
+SCALAR_COLUMNS: dict[str, tuple[str, ...]] = {
+    **ANALYZED_COLUMNS,
     "messages": tuple(c for c in ANALYZED_COLUMNS["messages"] if c != "type"),
 }
 
@@ -174,6 +175,7 @@ def analyze_run(source: str | Path | RunData, opts: AnalysisOptions | None = Non
     flagged = full or onset is not None   # the flags feed the scalars through the diagnosis only
     timeline = (drone_timeline(flow, disc, run.drones, opts.window_s, sampling.tick_s(run)) if flagged
                 else pd.DataFrame())
+    del disc   # a third of the state's size, not needed by what follows (the diagnosis makes its own)
     swarm = metrics.swarm_timeline(run.tables["state"], run.drones)
     connectivity = network.connectivity_timeline(flow, run.nodes, opts.graph_window_s)
     flags = anomaly.detect(timeline, opts.tests()) if flagged else pd.DataFrame()

@@ -114,15 +114,23 @@ def test_a_message_row_with_no_time_has_the_messages_read_whole(plain_run, tmp_p
     _equal(loaded, streamed)
 
 
-def test_the_cli_writes_the_tables_of_the_loaded_run(plain_run, tmp_path, monkeypatch):
-    """``swarmbox analyze`` streams the messages: its files, byte for byte, are those of the loaded run's
-    analysis written the same way."""
+@pytest.mark.parametrize(("window", "batch_rows", "touch_rows"),
+                         [("inf", 1 << 16, 1 << 21), (str(SMALL_S), 1 << 16, 1 << 21), ("3", 97, 500)])
+def test_the_cli_writes_the_tables_of_the_loaded_run(plain_run, tmp_path, monkeypatch, window, batch_rows,
+                                                     touch_rows):
+    """``swarmbox analyze`` streams the messages and reads the state without the columns no table uses:
+    its files, byte for byte, are those of the run loaded whole (every column, the messages matched at
+    once, the links and agents grouped at once) and written the same way; in one window, in windows of
+    100 ms, and in 3 s windows read in batches of 97 rows with links and agents a few at a time."""
     from swarmbox.analysis.cli import analyze_main
     from swarmbox.analysis.outputs import write_run
 
-    monkeypatch.setenv(windows.ENV, str(SMALL_S))
+    monkeypatch.setenv(windows.ENV, "inf")
+    write_run(analyze_run(load_run(plain_run)), tmp_path / "ref", with_figures=False)
+    monkeypatch.setenv(windows.ENV, window)
+    monkeypatch.setattr(windows, "BATCH_ROWS", batch_rows)
+    monkeypatch.setattr(windows, "TOUCH_ROWS", touch_rows)
     assert analyze_main([str(plain_run), "--no-figures", "--out", str(tmp_path / "cli")]) == 0
-    write_run(analyze_run(load_run(plain_run, ANALYZED_COLUMNS)), tmp_path / "ref", with_figures=False)
     names = sorted(p.name for p in (tmp_path / "ref" / "tables").iterdir())
     assert names == sorted(p.name for p in (tmp_path / "cli" / "tables").iterdir()) and "links.csv" in names
     for name in names:
@@ -131,7 +139,7 @@ def test_the_cli_writes_the_tables_of_the_loaded_run(plain_run, tmp_path, monkey
 
 
 def test_per_agent_metrics_a_few_agents_at_a_time(plain_run, monkeypatch):
-    """The agents', the timeline's and the diagnosis' latency and loss grouped over chunks of agents
+    """The links', agents', the timeline's and the diagnosis' latency and loss grouped over chunks of agents
     (at most 500 rows of the doubled flow each: chunks of two or three agents here, each averaged as
     pandas averages the whole) equal those grouped at once."""
     whole = _analysis(plain_run, monkeypatch, "inf")
@@ -141,6 +149,13 @@ def test_per_agent_metrics_a_few_agents_at_a_time(plain_run, monkeypatch):
     for chunk in chunks:   # no chunk falls back to the whole: its delivered rows are not in key order
         both = network.touching(whole.flow, ["delivered"], chunk)
         assert not network.sorted_keys(both["agent"].to_numpy()[both["delivered"].to_numpy()])
+    links = network._link_chunks(whole.flow["src"].to_numpy(), whole.flow["dst"].to_numpy(), 500)
+    assert len(links) > 1 and sorted(np.concatenate(links)) == list(range(len(whole.flow)))   # each row once
+    for rows in links:   # the links' chunks: two links at least, never in key order
+        mine = whole.flow.iloc[rows]
+        mine = mine[mine["delivered"]]
+        assert len(mine.groupby(["src", "dst"])) >= 2
+        assert not network.sorted_keys(mine["src"].to_numpy(), mine["dst"].to_numpy())
     drones = network.agent_chunks(whole.flow, whole.run.drones)   # the timeline's and the diagnosis'
     assert len(drones) > 1
     for chunk in drones:
@@ -163,6 +178,23 @@ def test_sorted_keys():
     assert not network.sorted_keys(np.array([1, 1, 2]), np.array([6, 5, 0]))
     assert not network.sorted_keys(np.array([2, 1]))
     assert network.sorted_keys(np.array([3]))
+
+
+@pytest.mark.parametrize("block", [1, 2, 5, 64])
+def test_sorted_keys_block_by_block(block):
+    """The marked rows' order told a block at a time, as of the marked rows taken whole; an unmarked row
+    out of order (3 before 2) does not count, a marked one across a block edge does."""
+    rng = np.random.default_rng(7)
+    a, b = np.array([1, 3, 1, 1, 2, 2, 2, 4]), np.array([0, 0, 1, 2, 0, 5, 7, 1])
+    marked = np.array([True, False, True, True, True, True, True, True])
+    assert network.sorted_where(marked, a, b, block=block)
+    assert not network.sorted_where(np.ones(len(a), dtype=bool), a, b, block=block)
+    for _ in range(200):
+        where = rng.random(len(a)) < 0.6
+        expected = network.sorted_keys(a[where], b[where])
+        assert network.sorted_where(where, a, b, block=block) == expected
+        x = rng.integers(0, 3, 9)
+        assert network.sorted_where(where[:8], x[:8], block=block) == network.sorted_keys(x[:8][where[:8]])
 
 
 def _unified(run_dir):

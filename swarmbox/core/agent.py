@@ -250,37 +250,49 @@ class AgentNode(Node):
     def _stage_work(self, tel: Telemetry, now: float) -> bool:
         stage = self.stage
         if stage in _LOOP_STAGES:
-            if (stage is _EXECUTION and not tel.armed
-                    and self.stage_tick % self.timing.arm_retry_ticks == 0):
-                self.vehicle.arm()
-            try:   # call_hook, inlined: this runs once per drone and tick
-                result = self.algorithm.run_stage(stage, self.ctx)
-            except AlgorithmError:   # a fleet hook's, naming its drones already
-                raise
-            except Exception as exc:  # the user's code may raise anything
-                raise hook_error(self, _LOOP_HOOK[stage], exc) from exc
-            complete, sp = result
+            complete, sp = self._loop_hooks(stage, tel)
             if sp is not None:
-                if type(sp) is not Setpoint:
-                    raise TypeError(f"drone {self.node_id}: exec_loop returned {type(sp).__name__}, "
-                                    "expected Setpoint or None")
-                verdict = self.vehicle.setpoint(sp)
-                n, e, d = sp.ned
-                yaw = sp.yaw_rad
-                if verdict is None or (verdict.action == "ok" and not verdict.reason):   # the usual case
-                    action, why = _OK_CODE, NO_TEXT
-                else:
-                    action, why = TEXTS.code(verdict.action), TEXTS.code(verdict.reason)
-                self._log_setpoint(pack_setpoint(now, self.time.tick, _KIND_CODES[sp.kind], n, e, d,
-                                                 _NAN if yaw is None else yaw, action, why))
+                self.send_setpoint(sp, now)
             if stage is _EXECUTION and complete != self._exec_done:
-                self._exec_done = complete
-                self.event("progress", "exec_complete" if complete else "exec_incomplete", self.node_id)
+                self._note_exec(complete)
             return complete
         if stage in _DOWN_STAGES:
             return tel.landed and not tel.armed  # touched down and disarmed by the autopilot
 
         return True  # ICEBREAK, TERMINATION
+
+    def _loop_hooks(self, stage: Stage, tel: Telemetry) -> tuple[bool, Setpoint | None]:
+        """A loop stage's work before its setpoint: the arming retry and the hooks' (complete, setpoint)."""
+        if (stage is _EXECUTION and not tel.armed
+                and self.stage_tick % self.timing.arm_retry_ticks == 0):
+            self.vehicle.arm()
+        try:   # call_hook, inlined: this runs once per drone and tick
+            complete, sp = self.algorithm.run_stage(stage, self.ctx)
+        except AlgorithmError:   # a fleet hook's, naming its drones already
+            raise
+        except Exception as exc:  # the user's code may raise anything
+            raise hook_error(self, _LOOP_HOOK[stage], exc) from exc
+        if sp is not None and type(sp) is not Setpoint:
+            raise TypeError(f"drone {self.node_id}: exec_loop returned {type(sp).__name__}, "
+                            "expected Setpoint or None")
+        return complete, sp
+
+    def send_setpoint(self, sp: Setpoint, now: float) -> None:
+        """Hand ``sp`` to the vehicle and log it with the safety monitor's verdict."""
+        verdict = self.vehicle.setpoint(sp)
+        n, e, d = sp.ned
+        yaw = sp.yaw_rad
+        if verdict is None or (verdict.action == "ok" and not verdict.reason):   # the usual case
+            action, why = _OK_CODE, NO_TEXT
+        else:
+            action, why = TEXTS.code(verdict.action), TEXTS.code(verdict.reason)
+        self._log_setpoint(pack_setpoint(now, self.time.tick, _KIND_CODES[sp.kind], n, e, d,
+                                         _NAN if yaw is None else yaw, action, why))
+
+    def _note_exec(self, complete: bool) -> None:
+        """The execution stage's completion changed: a progress event (the ground's stage follows it)."""
+        self._exec_done = complete
+        self.event("progress", "exec_complete" if complete else "exec_incomplete", self.node_id)
 
     # -- superior watchdog ----------------------------------------------------------------------
     def _hand_over(self, why: str) -> None:

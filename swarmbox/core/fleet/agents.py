@@ -12,6 +12,8 @@ a message other than a Heartbeat confirming their stage, or whose watchdog fires
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from functools import partial
 from operator import attrgetter, methodcaller
 from typing import Any, NamedTuple
 
@@ -19,6 +21,7 @@ import numpy as np
 
 from swarmbox.api import Telemetry
 from swarmbox.core.agent import AgentNode
+from swarmbox.core.fleet.setpoints import SetpointBatch, SetpointRows
 from swarmbox.core.messages import make_msg_id
 from swarmbox.core.stages import TERMINAL, Stage
 
@@ -35,6 +38,7 @@ class _Armed(NamedTuple):
 
 
 _ARMED_ONLY = {True: _Armed(True), False: _Armed(False)}
+_EXECUTION = Stage.EXECUTION
 ICEBREAK, PREPARATION, EXECUTION, LANDING, TERMINATION, ABORT = (int(s) for s in (
     Stage.ICEBREAK, Stage.PREPARATION, Stage.EXECUTION, Stage.LANDING, Stage.TERMINATION, Stage.ABORT))
 
@@ -180,15 +184,34 @@ class FleetAgent(AgentNode):
         # held reliable tasks or a proximity alert in force: the inbox is drained every tick
         self._fleet.sticky[self._k] = bool(self._window_busy or self.proximity)
 
-    def fleet_hooks(self, now: float) -> bool:
-        """The tick of a drone in a loop stage with nothing in its inbox and its watchdog quiet (the
-        fleet counted it): the stage's hooks and setpoint; returns ``complete``."""
-        self._own = None
-        return self._stage_work(self.telemetry, now)
+    def buffer_setpoints(self, rows: SetpointRows) -> Callable[[bytes], None]:
+        """Write this drone's ``setpoints`` rows into the fleet's buffer ``rows`` (which hands them to
+        its log in order); returns the log's own appender."""
+        own, self._log_setpoint = self._log_setpoint, partial(rows.one, self.node_id)
+        return own
 
-    def fleet_row(self, now: float, armed: bool) -> bool:
-        """fleet_hooks for a batch algorithm's drone: its row of the fleet's hooks (setpoint, safety
-        verdict, rows). A loop stage's work reads of the telemetry only whether the vehicle is armed,
+    def fleet_hooks(self, batch: SetpointBatch) -> bool:
+        """The tick of a drone in a loop stage with nothing in its inbox and its watchdog quiet (the
+        fleet counted it): the stage's hooks, its setpoint left in ``batch``; returns ``complete``."""
+        self._own = None
+        return self._loop_into(self.telemetry, batch)
+
+    def fleet_row(self, armed: bool, batch: SetpointBatch) -> bool:
+        """fleet_hooks for a batch algorithm's drone: its row of the fleet's hooks (the setpoint left
+        in ``batch``). A loop stage's work reads of the telemetry only whether the vehicle is armed,
         which the arrays hold: the drone's record is not fetched."""
         self._own = None
-        return self._stage_work(_ARMED_ONLY[armed], now)
+        return self._loop_into(_ARMED_ONLY[armed], batch)
+
+    def _loop_into(self, tel: Any, batch: SetpointBatch) -> bool:
+        """AgentNode._stage_work of a loop stage with the setpoint handed over later, by the batch. The
+        progress event comes before it here: it goes to the node's log now, the vehicle's events
+        from the setpoint after the step, as on the object core."""
+        stage = self.stage
+        complete, sp = self._loop_hooks(stage, tel)
+        if sp is not None:
+            batch.drones.append(self._k)
+            batch.setpoints.append(sp)
+        if stage is _EXECUTION and complete != self._exec_done:
+            self._note_exec(complete)
+        return complete

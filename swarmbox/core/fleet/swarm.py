@@ -32,6 +32,7 @@ from swarmbox.core.fleet.agents import (
 from swarmbox.core.fleet.ground import FleetGround
 from swarmbox.core.fleet.network import HEARTBEAT, FleetNetwork
 from swarmbox.core.fleet.rows import MessageRows, take
+from swarmbox.core.fleet.setpoints import SetpointBatch, SetpointRows
 from swarmbox.core.fleet.view import ArrayFleet
 from swarmbox.core.messages import _REPORT_FIXED, TaskAck
 from swarmbox.core.stages import Stage
@@ -105,6 +106,12 @@ class FleetSwarm(Swarm):
         self._last_tick = 1 << 62   # the run's last tick (run sets it)
         self.live = np.ones(fleet.n, dtype=bool)   # not removed (a crash removes a drone's node)
         self._all_live = True
+        # every drone's setpoint rows go through one buffer; the hooks drones' setpoints in one batch
+        self.setpoint_rows = SetpointRows()
+        for a in agents:
+            self.setpoint_rows.appenders[a.node_id] = a.buffer_setpoints(self.setpoint_rows)
+        self.batch = SetpointBatch(self.backend, self.setpoint_rows,
+                                   np.array([a.node_id for a in agents], dtype=np.int16))
         if self.fleet_driver is not None:
             for k, agent in enumerate(agents):
                 agent.net = DroneNet(network, k + 1)
@@ -126,6 +133,7 @@ class FleetSwarm(Swarm):
         (where the recorder hands its buffers over) and at the end, whatever happens."""
         def hand_over(swarm: Swarm) -> None:
             self.rows.hand_over()
+            self.setpoint_rows.hand_over()
             if progress is not None:
                 progress(swarm)
 
@@ -134,6 +142,7 @@ class FleetSwarm(Swarm):
             return super().run(max_sim_time_s, speed, hand_over)
         finally:
             self.rows.hand_over()
+            self.setpoint_rows.hand_over()
             self.fleet.settle(self._vehicles)
 
     def remove_agent(self, drone_id: int) -> None:
@@ -228,37 +237,44 @@ class FleetSwarm(Swarm):
 
     def run_hooks(self, full: np.ndarray, hooks: np.ndarray) -> None:
         """The drones that tick in Python, in fleet order: ``full`` the whole tick (messages in their
-        inbox, a watchdog firing), ``hooks`` only their loop stage's hooks."""
-        net, agents, f = self.network, self.agents, self.fleet
+        inbox, a watchdog firing), ``hooks`` only their loop stage's hooks, whose setpoints go to the
+        backend in one batch after the last drone's tick (:mod:`swarmbox.core.fleet.setpoints`)."""
+        net, agents, f, batch = self.network, self.agents, self.fleet, self.batch
         f.fetch(self._vehicles, full.tolist())
         f.fetch(self._vehicles, hooks.tolist())
-        if not len(full):   # the usual tick: nothing a drone sends but its Report
-            now = self.now.tolist()
-            f.complete[hooks] = [agents[k].fleet_hooks(now[k]) for k in hooks.tolist()]
-            return
-        now, whole = self.now.tolist(), set(full.tolist())
-        for k in np.union1d(full, hooks).tolist():
-            net.phase = k + 1   # what this drone sends goes out after the last drone's, before its Report
-            if k in whole:
-                agents[k].fleet_tick()
-            else:
-                f.complete[k] = agents[k].fleet_hooks(now[k])
+        try:
+            if not len(full):   # the usual tick: nothing a drone sends but its Report
+                f.complete[hooks] = [agents[k].fleet_hooks(batch) for k in hooks.tolist()]
+                return
+            whole = set(full.tolist())
+            for k in np.union1d(full, hooks).tolist():
+                net.phase = k + 1   # what this drone sends goes out after the last drone's, before its Report
+                if k in whole:
+                    agents[k].fleet_tick()
+                else:
+                    f.complete[k] = agents[k].fleet_hooks(batch)
+        finally:   # a failing hook: the drones before it have handed their setpoints over
+            batch.flush(self.now, self.time.tick)
 
     def run_batch(self, full: np.ndarray, hooks: np.ndarray) -> None:
         """run_hooks for a batch algorithm: every ``full`` drone's inbound half in fleet order, the
         loop hooks once over the fleet (its snapshot reads every drone), then each drone's stage
-        work (its row of the hooks' results: setpoint, safety verdict, rows) in fleet order."""
-        agents, f = self.agents, self.fleet
+        work (its row of the hooks' results: setpoint, rows) in fleet order, the setpoints of the
+        drones not ticking whole handed over in one batch."""
+        agents, f, batch = self.agents, self.fleet, self.batch
         f.fetch(self._vehicles, full.tolist())
         for k in full.tolist():
             agents[k].fleet_inbound()
         self.fleet_driver.step()
-        now, armed, whole = self.now.tolist(), f.armed.tolist(), set(full.tolist())
-        for k in np.union1d(full, hooks).tolist():
-            if k in whole:
-                agents[k].fleet_outbound()
-            else:
-                f.complete[k] = agents[k].fleet_row(now[k], armed[k])
+        armed, whole = f.armed.tolist(), set(full.tolist())
+        try:
+            for k in np.union1d(full, hooks).tolist():
+                if k in whole:
+                    agents[k].fleet_outbound()
+                else:
+                    f.complete[k] = agents[k].fleet_row(armed[k], batch)
+        finally:
+            batch.flush(self.now, self.time.tick)
 
     def send_reports(self) -> None:
         """Every drone's Report, from the arrays (the superiors are fixed: every drone under the ground)."""

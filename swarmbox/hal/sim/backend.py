@@ -23,6 +23,7 @@ import numpy as np
 from swarmbox.api import Telemetry
 from swarmbox.hal.safety import SafetyLimits, reach_m
 from swarmbox.hal.sim import kernel
+from swarmbox.hal.sim.batch import BatchSetpoints
 from swarmbox.hal.sim.control import CascadedController
 from swarmbox.hal.sim.params import SimParams
 from swarmbox.hal.sim.readout import FleetReadout
@@ -55,7 +56,7 @@ def _check_homes(homes_ned_m: Sequence[Sequence[float]]) -> np.ndarray:
     return homes
 
 
-class SimBackend:
+class SimBackend(BatchSetpoints):
     """A simulated fleet (implements :class:`swarmbox.hal.vehicle.Backend`).
 
     Constructed by the runner as ``SimBackend(homes_ned_m=..., tick_s=..., rng=..., obstacles=...,

@@ -74,12 +74,18 @@ class SetpointRows:
 
 
 class SetpointBatch:
-    """This tick's setpoints of the drones whose hooks ran, in fleet order, until :meth:`flush`."""
+    """This tick's setpoints of the drones whose hooks ran, in fleet order, until :meth:`flush`.
+
+    Each drone's row is kept between ticks (``_template``): a drone that returns the same Setpoint
+    object as last tick (a hover, a held waypoint) costs an identity test, not a new row."""
 
     def __init__(self, backend: Any, rows: SetpointRows, node_ids: np.ndarray) -> None:
         self._backend, self.rows, self._ids = backend, rows, node_ids
         self.drones: list[int] = []        # fleet indices
         self.setpoints: list[Setpoint] = []
+        self._template = np.zeros(len(node_ids), dtype=SETPOINT_ROW)
+        self._template["verdict"], self._template["reason"] = _OK, NO_TEXT
+        self._last: list[Setpoint | None] = [None] * len(node_ids)   # the setpoint each row is of
 
     def flush(self, now: np.ndarray, tick: int) -> None:
         """Hand the setpoints to the backend (the vehicles' ``setpoint``, in order) and write their rows."""
@@ -88,14 +94,22 @@ class SetpointBatch:
             return
         self.drones, self.setpoints = [], []
         odd = self._backend.setpoints(ks, sps)
-        m = len(ks)
-        rows = np.empty(m, dtype=SETPOINT_ROW)
+        last = self._last
+        new = [j for j, (k, sp) in enumerate(zip(ks, sps, strict=True)) if sp is not last[k]]
+        if new:
+            self._learn([ks[j] for j in new], [sps[j] for j in new])
+        rows = take(self._template, ks)
         rows["t_s"], rows["tick"] = now[ks], tick
-        rows["kind"] = list(map(_KIND_CODE.__getitem__, map(_KIND, sps)))
-        ned = np.fromiter(chain.from_iterable(map(_NED, sps)), float, 3 * m).reshape(m, 3)
-        rows["n"], rows["e"], rows["d"] = ned[:, 0], ned[:, 1], ned[:, 2]
-        rows["yaw_rad"] = [np.nan if y is None else y for y in map(_YAW, sps)]
-        rows["verdict"], rows["reason"] = _OK, NO_TEXT
         for j, verdict in odd:
             rows["verdict"][j], rows["reason"][j] = TEXTS.code(verdict.action), TEXTS.code(verdict.reason)
         self.rows.add(self._ids[ks], rows)
+
+    def _learn(self, ks: list[int], sps: list[Setpoint]) -> None:
+        """The rows of drones ``ks`` for their new setpoints ``sps``."""
+        m, t = len(ks), self._template
+        ned = np.fromiter(chain.from_iterable(map(_NED, sps)), float, 3 * m).reshape(m, 3)
+        t["kind"][ks] = list(map(_KIND_CODE.__getitem__, map(_KIND, sps)))
+        t["n"][ks], t["e"][ks], t["d"][ks] = ned[:, 0], ned[:, 1], ned[:, 2]
+        t["yaw_rad"][ks] = [np.nan if y is None else y for y in map(_YAW, sps)]
+        for k, sp in zip(ks, sps, strict=True):
+            self._last[k] = sp

@@ -31,6 +31,7 @@ class BatchSetpoints:
     vehicles: list[Any]
     limits: SafetyLimits
     _est: np.ndarray   # (3, N): the estimated positions the vehicles' checks read
+    _known: _Known | None = None
 
     def setpoints(self, index: list[int], sps: list[Setpoint]) -> list[tuple[int, SetpointVerdict]]:
         """Hand ``sps[j]`` to vehicle ``index[j]`` for every ``j``, as ``vehicles[i].setpoint(sp)`` in
@@ -42,13 +43,11 @@ class BatchSetpoints:
         if held:
             fast[held] = self._within(np.array([index[j] for j in held], dtype=np.intp),
                                       [sps[j] for j in held])
+        for i in np.asarray(index)[fast].tolist():   # what SimVehicle.setpoint does here: marks it fresh
+            vehicles[i]._held.fresh = True
         odd = []
-        for j, (i, sp, quick) in enumerate(zip(index, sps, fast.tolist(), strict=True)):
-            vehicle = vehicles[i]
-            if quick:   # what SimVehicle.setpoint does for this case: the held setpoint is fresh
-                vehicle._held.fresh = True
-                continue
-            verdict = vehicle.setpoint(sp)
+        for j in np.flatnonzero(~fast).tolist():   # every other in order, as the vehicle judges it
+            verdict = vehicles[index[j]].setpoint(sps[j])
             if verdict.action != "ok" or verdict.reason:
                 odd.append((j, verdict))
         return odd
@@ -56,10 +55,13 @@ class BatchSetpoints:
     def _within(self, index: np.ndarray, sps: list[Setpoint]) -> np.ndarray:
         """Whether each vehicle's held setpoint passes again: a position within the jump limit of the
         estimate, a velocity or an acceleration flown clear of the envelope's boundary."""
+        if self._known is None:
+            self._known = _Known(len(self.vehicles))
+        ned, position = self._known.columns(index, sps)
         lim, est = self.limits, self._est[:, index]
-        ned = np.fromiter(chain.from_iterable(sp.ned for sp in sps), float, 3 * len(sps)).reshape(-1, 3).T
-        position = np.fromiter((sp.kind is _POSITION for sp in sps), bool, len(sps))
         jump = np.sqrt(((ned - est) ** 2).sum(axis=0)) <= lim.max_jump_m * (1.0 - _MARGIN)
+        if position.all():
+            return jump
         reach = reach_m(lim) * (1.0 + _MARGIN) + _MARGIN * (lim.geofence_radius_m + lim.max_alt_m)
         clear = (lim.geofence_radius_m - np.hypot(est[0], est[1]) > reach) & (lim.max_alt_m + est[2] > reach)
         return np.where(position, jump, clear)
@@ -74,3 +76,26 @@ def _held(vehicles: list[Any], index: list[int], sps: list[Setpoint]) -> list[in
         if sp == v._last_ok and v.frozen is None and not v._ok_verdict.reason:
             out.append(j)
     return out
+
+
+class _Known:
+    """The north/east/down and kind of the setpoint each vehicle was last checked with: a vehicle
+    holding the same Setpoint object costs an identity test, not a conversion."""
+
+    def __init__(self, n: int) -> None:
+        self.ned = np.zeros((3, n))
+        self.position = np.zeros(n, dtype=bool)
+        self.sps: list[Setpoint | None] = [None] * n
+
+    def columns(self, index: np.ndarray, sps: list[Setpoint]) -> tuple[np.ndarray, np.ndarray]:
+        known = self.sps
+        new = [j for j, (i, sp) in enumerate(zip(index.tolist(), sps, strict=True)) if sp is not known[i]]
+        if new:
+            rows = index[new]
+            fresh = [sps[j] for j in new]
+            self.ned[:, rows] = np.fromiter(chain.from_iterable(sp.ned for sp in fresh), float,
+                                            3 * len(new)).reshape(-1, 3).T
+            self.position[rows] = [sp.kind is _POSITION for sp in fresh]
+            for i, sp in zip(rows.tolist(), fresh, strict=True):
+                known[i] = sp
+        return self.ned[:, index], self.position[index]

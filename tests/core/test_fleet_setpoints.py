@@ -150,8 +150,12 @@ def _script(b: SimBackend, held: dict, tick: int) -> list[tuple[int, Setpoint]]:
             sp = held.setdefault(i, Setpoint.position(n + 2.0, e, -3.0))
         elif role == 1:   # the same values, a new object, every tick; a 20 m point now and then
             sp = Setpoint.position(n + 20.0, e, -3.0) if tick % 50 == 7 else Setpoint.position(n, e, -4.0)
-        elif role == 2:   # out towards the fence, held: fast while clear, then judged near it
-            sp = held.setdefault(i, Setpoint.velocity(3.0, 2.0, 0.0))
+        elif role == 2:   # out towards the fence, held: fast while clear, judged near it; then back,
+            if 290 <= tick < 330:   # silent while it leaves the fence's reach, then the same again
+                continue
+            away = tick < 170
+            sign = 1.0 if away else -1.0
+            sp = held.setdefault((i, away), Setpoint.velocity(3.0 * sign, 2.0 * sign, 0.0))
         elif role == 3:   # nothing every other tick; an acceleration otherwise, a NaN once
             if tick % 2:
                 continue
@@ -165,12 +169,18 @@ def _script(b: SimBackend, held: dict, tick: int) -> list[tuple[int, Setpoint]]:
     return out
 
 
+def _autopilot(b: SimBackend) -> list[tuple]:
+    """What each vehicle's setpoint handling keeps between calls (its mode, the setpoint flown, the
+    last one passed unchanged, the velocity held and whether it came since the last step)."""
+    return [(v.mode, v._last_sp, v._last_ok, v._held.requested, v._held.fresh) for v in b.vehicles]
+
+
 def test_batch_setpoints_do_what_each_vehicles_setpoint_does():
     """Twin fleets: one is sent its setpoints through ``setpoints``, the other vehicle by vehicle; the
     verdicts, the events and the flight (every state array, bit for bit) must stay the same."""
     batch, each = _fleet_in_the_air(12), _fleet_in_the_air(12)
     fast, seen, held, odd_jumps = 0, set(), {}, [0] * 12
-    for tick in range(240):
+    for tick in range(360):
         for fleet in (batch, each):
             if tick == 20:   # vehicle 6's estimate jumps 20 m: its held point is past the jump limit
                 fleet.gnss_offset_ned_m[6] = (20.0, 0.0, 0.0)
@@ -183,6 +193,7 @@ def test_batch_setpoints_do_what_each_vehicles_setpoint_does():
         verdicts = [each.vehicles[i].setpoint(sp) for i, sp in script]
         expected = {j: v for j, v in enumerate(verdicts) if v.action != "ok" or v.reason}
         assert odd == expected, tick
+        assert _autopilot(batch) == _autopilot(each), tick
         seen |= {(v.action, v.reason, v.flown and v.flown.kind.name) for v in expected.values()}
         for j, v in expected.items():
             odd_jumps[index[j]] += v.reason == "jump"

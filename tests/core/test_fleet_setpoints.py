@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pandas.testing import assert_frame_equal
 
 from swarmbox.api import DroneAlgorithm, Setpoint
 from swarmbox.bench.hover import grid
@@ -21,7 +22,7 @@ from swarmbox.hal.safety import SafetyLimits
 from swarmbox.hal.sim.backend import SimBackend
 from swarmbox.testing import Flight
 from tests.conftest import table
-from tests.core.test_fleet_identity import assert_same_run
+from tests.core.test_fleet_identity import _fly, assert_same_run
 
 #: 40 m fence, jumps over 50 m refused, 4 m/s top speed (a velocity is judged near the fence within
 #: 10 m of it); a vehicle armed on the ground disarms after 3 s
@@ -77,6 +78,15 @@ class EdgeDrone(DroneAlgorithm):
         return ctx.stage_time_s > 16.0
 
 
+class FailingDrone(EdgeDrone):
+    """EdgeDrone whose drone 3 raises in its 100th execution tick: the run fails there."""
+
+    def exec_loop(self, ctx):
+        if ctx.id == 3 and ctx.tick == 100:
+            raise RuntimeError("drone 3 gives up")
+        return super().exec_loop(ctx)
+
+
 def _events(run_dir: Path, drone: int):
     return table(run_dir, f"drone_{drone}", "events")
 
@@ -112,6 +122,23 @@ def test_setpoint_edges_log_equal_on_both_cores(tmp_path, network):
     assert len(disarmed) >= 2   # armed again by the drone's retry, and disarmed again
     late = _setpoints(run, 5)
     assert late["tick"].min() > int(disarmed["tick"].iloc[0])   # its first setpoint after the disarm
+
+
+def test_a_failing_hook_leaves_the_setpoints_of_the_drones_before_it_logged(tmp_path):
+    """The object core hands each drone's setpoint over right after its hooks: when drone 3's hook
+    raises, drones 0-2 have flown and logged theirs for that tick, drones 4-5 have not. (Only the
+    setpoints and the outcome are compared: on the fleet core the drones before a failing hook have
+    not sent that tick's Report, which the object core's have.)"""
+    failing = [*EDGES, "algo.drone._target_=tests.core.test_fleet_setpoints.FailingDrone", "seed=2"]
+    obj = _fly(tmp_path / "object", "object", failing, grid(6))
+    fleet = _fly(tmp_path / "fleet", "fleet", failing, grid(6))
+    assert obj["status"] == fleet["status"] == "failed" and "drone 3 gives up" in obj["reason"]
+    assert obj["reason"] == fleet["reason"]
+    for i in range(6):
+        assert_frame_equal(_setpoints(tmp_path / "object", i), _setpoints(tmp_path / "fleet", i),
+                           check_exact=True)
+    last = {i: int(_setpoints(tmp_path / "object", i)["tick"].max()) for i in (0, 2, 4)}
+    assert last[0] == last[2] == last[4] + 1
 
 
 def test_setpoint_edges_of_a_batch_of_36_log_equal_on_both_cores(tmp_path):

@@ -89,13 +89,15 @@ class FleetState:
         self.link_ok[:] = True
         self.modes = list(map(_MODE, vehicles))
 
-    def fetch(self, vehicles: list[Any], drones: list[int]) -> None:
-        """The telemetry records of ``drones`` (this tick's reading)."""
-        tels, fetched, now = self.tels, self.fetched, self.tick_read
-        for k in drones:
-            if fetched[k] != now:
-                tels[k] = vehicles[k].telemetry()
-                fetched[k] = now
+    def fetch(self, many: Callable[[list[int]], list[Telemetry]], drones: np.ndarray) -> None:
+        """The telemetry records of ``drones`` (this tick's reading); ``many``: the backend's records
+        of a list of vehicles (``vehicles[k].telemetry()`` of each)."""
+        todo = drones[self.fetched[drones] != self.tick_read]
+        if len(todo):
+            tels = self.tels
+            for k, tel in zip(todo.tolist(), many(todo.tolist()), strict=True):
+                tels[k] = tel
+            self.fetched[todo] = self.tick_read
 
     def settle(self, vehicles: list[Any]) -> None:
         """Records for the drones not fetched at the last reading, with what the arrays read then

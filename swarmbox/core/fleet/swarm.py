@@ -92,6 +92,9 @@ class FleetSwarm(Swarm):
         self.fleet, self.network, self.rows = fleet, network, rows
         self.end_watch = FleetEndWatch(ground.timing.lost_superior_ticks)   # type: ignore[assignment]
         self._vehicles = [a.vehicle for a in agents]
+        #: the telemetry records of a list of drones: the backend's in one pass where it has that entry
+        self._records = getattr(self.backend, "telemetry_many", None) or (
+            lambda ks: [self._vehicles[k].telemetry() for k in ks])
         self._clocks = [a.clock for a in agents]
         t = ground.timing
         self._lost_superior = t.lost_superior_ticks
@@ -240,8 +243,8 @@ class FleetSwarm(Swarm):
         inbox, a watchdog firing), ``hooks`` only their loop stage's hooks, whose setpoints go to the
         backend in one batch after the last drone's tick (:mod:`swarmbox.core.fleet.setpoints`)."""
         net, agents, f, batch = self.network, self.agents, self.fleet, self.batch
-        f.fetch(self._vehicles, full.tolist())
-        f.fetch(self._vehicles, hooks.tolist())
+        f.fetch(self._records, full)
+        f.fetch(self._records, hooks)
         try:
             if not len(full):   # the usual tick: nothing a drone sends but its Report
                 f.complete[hooks] = [agents[k].fleet_hooks(batch) for k in hooks.tolist()]
@@ -262,7 +265,7 @@ class FleetSwarm(Swarm):
         work (its row of the hooks' results: setpoint, rows) in fleet order, the setpoints of the
         drones not ticking whole handed over in one batch."""
         agents, f, batch = self.agents, self.fleet, self.batch
-        f.fetch(self._vehicles, full.tolist())
+        f.fetch(self._records, full)
         for k in full.tolist():
             agents[k].fleet_inbound()
         self.fleet_driver.step()

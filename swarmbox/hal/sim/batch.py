@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from swarmbox.api import Setpoint, SetpointKind, SetpointVerdict
+from swarmbox.api import Setpoint, SetpointKind, SetpointVerdict, Telemetry
 from swarmbox.hal.safety import SafetyLimits, reach_m
 
 _POSITION = SetpointKind.POSITION
@@ -26,12 +26,18 @@ _MARGIN = 1e-9
 
 
 class BatchSetpoints:
-    """Mixin of :class:`~swarmbox.hal.sim.backend.SimBackend`: the batch entry beside ``setpoint``."""
+    """Mixin of :class:`~swarmbox.hal.sim.backend.SimBackend`: the batch entries beside each vehicle's
+    ``setpoint`` and ``telemetry``."""
 
     vehicles: list[Any]
     limits: SafetyLimits
     _est: np.ndarray   # (3, N): the estimated positions the vehicles' checks read
     _known: _Known | None = None
+    _readout: Any
+
+    def telemetry_many(self, index: list[int]) -> list[Telemetry]:
+        """``vehicles[i].telemetry()`` for every ``i`` of ``index``."""
+        return self._readout.telemetry_many(index)
 
     def setpoints(self, index: list[int], sps: list[Setpoint]) -> list[tuple[int, SetpointVerdict]]:
         """Hand ``sps[j]`` to vehicle ``index[j]`` for every ``j``, as ``vehicles[i].setpoint(sp)`` in

@@ -68,6 +68,17 @@ class FleetReadout:
             tel = self._tel[i] = tel._replace(armed=v.armed, mode=v.mode)   # type: ignore[index]
         return tel
 
+    def telemetry_many(self, index: list[int]) -> list[Telemetry]:
+        """``telemetry_of`` of each vehicle of ``index``, in one pass (a crashed vehicle's is frozen)."""
+        tels = self._tel or self._build()
+        out = list(map(tels.__getitem__, index))
+        vehicles = self.vehicles
+        for j, (i, tel) in enumerate(zip(index, out, strict=True)):
+            v = vehicles[i]
+            if tel.armed is not v.armed or tel.mode is not v.mode or v.frozen is not None:
+                out[j] = v.telemetry()
+        return out
+
     def _build(self) -> list[Telemetry]:
         """Every vehicle's telemetry in one pass: the vectors are made by ``zip`` and the records by
         ``tuple.__new__``, both in C."""

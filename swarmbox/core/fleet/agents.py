@@ -37,7 +37,7 @@ class _Armed(NamedTuple):
     armed: bool
 
 
-_ARMED_ONLY = {True: _Armed(True), False: _Armed(False)}
+ARMED_ONLY = {True: _Armed(True), False: _Armed(False)}
 _EXECUTION = Stage.EXECUTION
 ICEBREAK, PREPARATION, EXECUTION, LANDING, TERMINATION, ABORT = (int(s) for s in (
     Stage.ICEBREAK, Stage.PREPARATION, Stage.EXECUTION, Stage.LANDING, Stage.TERMINATION, Stage.ABORT))
@@ -192,23 +192,14 @@ class FleetAgent(AgentNode):
         own, self._log_setpoint = self._log_setpoint, partial(rows.one, self.node_id)
         return own
 
-    def fleet_hooks(self, batch: SetpointBatch) -> bool:
+    def fleet_loop(self, tel: Any, batch: SetpointBatch) -> bool:
         """The tick of a drone in a loop stage with nothing in its inbox and its watchdog quiet (the
-        fleet counted it): the stage's hooks, its setpoint left in ``batch``; returns ``complete``."""
+        fleet counted it): AgentNode._stage_work with its setpoint left in ``batch``, handed over
+        after the last drone's hooks; returns ``complete``. ``tel``: its telemetry record, or for a
+        batch algorithm's drone (whose loop work reads of it only whether the vehicle is armed)
+        ``ARMED_ONLY[armed]``. The progress event comes before the setpoint here: it goes to the
+        node's log now, the vehicle's events from the setpoint after the step, as on the object core."""
         self._own = None
-        return self._loop_into(self.telemetry, batch)
-
-    def fleet_row(self, armed: bool, batch: SetpointBatch) -> bool:
-        """fleet_hooks for a batch algorithm's drone: its row of the fleet's hooks (the setpoint left
-        in ``batch``). A loop stage's work reads of the telemetry only whether the vehicle is armed,
-        which the arrays hold: the drone's record is not fetched."""
-        self._own = None
-        return self._loop_into(_ARMED_ONLY[armed], batch)
-
-    def _loop_into(self, tel: Any, batch: SetpointBatch) -> bool:
-        """AgentNode._stage_work of a loop stage with the setpoint handed over later, by the batch. The
-        progress event comes before it here: it goes to the node's log now, the vehicle's events
-        from the setpoint after the step, as on the object core."""
         stage = self.stage
         complete, sp = self._loop_hooks(stage, tel)
         if sp is not None:

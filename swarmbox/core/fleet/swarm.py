@@ -21,6 +21,7 @@ from swarmbox.core.clock import readings
 from swarmbox.core.ending import EndWatch
 from swarmbox.core.fleet.agents import (
     ABORT,
+    ARMED_ONLY,
     DATA,
     EXECUTION,
     LANDING,
@@ -247,7 +248,8 @@ class FleetSwarm(Swarm):
         f.fetch(self._records, hooks)
         try:
             if not len(full):   # the usual tick: nothing a drone sends but its Report
-                f.complete[hooks] = [agents[k].fleet_hooks(batch) for k in hooks.tolist()]
+                tels = f.tels
+                f.complete[hooks] = [agents[k].fleet_loop(tels[k], batch) for k in hooks.tolist()]
                 return
             whole = set(full.tolist())
             for k in np.union1d(full, hooks).tolist():
@@ -255,7 +257,7 @@ class FleetSwarm(Swarm):
                 if k in whole:
                     agents[k].fleet_tick()
                 else:
-                    f.complete[k] = agents[k].fleet_hooks(batch)
+                    f.complete[k] = agents[k].fleet_loop(f.tels[k], batch)
         finally:   # a failing hook: the drones before it have handed their setpoints over
             batch.flush(self.now, self.time.tick)
 
@@ -275,7 +277,7 @@ class FleetSwarm(Swarm):
                 if k in whole:
                     agents[k].fleet_outbound()
                 else:
-                    f.complete[k] = agents[k].fleet_row(armed[k], batch)
+                    f.complete[k] = agents[k].fleet_loop(ARMED_ONLY[armed[k]], batch)
         finally:
             batch.flush(self.now, self.time.tick)
 

@@ -18,6 +18,7 @@ from pandas.testing import assert_frame_equal
 
 from swarmbox.api import DroneAlgorithm, Setpoint
 from swarmbox.bench.hover import grid
+from swarmbox.core.fleet.setpoints import SetpointBatch
 from swarmbox.hal.safety import SafetyLimits
 from swarmbox.hal.sim.backend import SimBackend
 from swarmbox.testing import Flight
@@ -95,10 +96,19 @@ def _setpoints(run_dir: Path, drone: int):
     return table(run_dir, f"drone_{drone}", "setpoints")
 
 
-@pytest.mark.parametrize("network", [[], ["network=wifi", "network.loss_prob=0.1"]])
-def test_setpoint_edges_log_equal_on_both_cores(tmp_path, network):
+@pytest.fixture(params=[1, SetpointBatch.SMALL], ids=["arrays", "per-drone"])
+def batch_from(request, monkeypatch):
+    """From how many setpoints in a tick the fleet hands them over as arrays (1: always)."""
+    monkeypatch.setattr(SetpointBatch, "SMALL", request.param)
+    return request.param
+
+
+@pytest.mark.parametrize("network", [[], ["network=wifi", "network.loss_prob=0.1"],
+                                     ["fault=clock_skew", "fault.targets=[1,4]", "fault.onset_s=2"]])
+def test_setpoint_edges_log_equal_on_both_cores(tmp_path, network, batch_from):
     """With wifi, Heartbeats and Reports arrive late and out of order: drones tick whole some ticks
-    (their setpoint handed over in their own tick) and join the batch on others."""
+    (their setpoint handed over in their own tick) and join the batch on others. With a clock fault
+    each row carries its own drone's clock."""
     assert_same_run(tmp_path, [*EDGES, "seed=3", *network], grid(6))
     run = tmp_path / "object"
     refused = _setpoints(run, 0)
@@ -124,7 +134,7 @@ def test_setpoint_edges_log_equal_on_both_cores(tmp_path, network):
     assert late["tick"].min() > int(disarmed["tick"].iloc[0])   # its first setpoint after the disarm
 
 
-def test_a_failing_hook_leaves_the_setpoints_of_the_drones_before_it_logged(tmp_path):
+def test_a_failing_hook_leaves_the_setpoints_of_the_drones_before_it_logged(tmp_path, batch_from):
     """The object core hands each drone's setpoint over right after its hooks: when drone 3's hook
     raises, drones 0-2 have flown and logged theirs for that tick, drones 4-5 have not. (Only the
     setpoints and the outcome are compared: on the fleet core the drones before a failing hook have
@@ -141,7 +151,7 @@ def test_a_failing_hook_leaves_the_setpoints_of_the_drones_before_it_logged(tmp_
     assert last[0] == last[2] == last[4] + 1
 
 
-def test_setpoint_edges_of_a_batch_of_36_log_equal_on_both_cores(tmp_path):
+def test_setpoint_edges_of_a_batch_of_36_log_equal_on_both_cores(tmp_path, batch_from):
     """Six drones of each role in one tick: the batch's array tests over many vehicles at once."""
     assert_same_run(tmp_path, [*EDGES, "seed=1"], grid(36))
     run = tmp_path / "object"

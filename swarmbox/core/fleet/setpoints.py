@@ -79,8 +79,13 @@ class SetpointBatch:
     Each drone's row is kept between ticks (``_template``): a drone that returns the same Setpoint
     object as last tick (a hover, a held waypoint) costs an identity test, not a new row."""
 
-    def __init__(self, backend: Any, rows: SetpointRows, node_ids: np.ndarray) -> None:
-        self._backend, self.rows, self._ids = backend, rows, node_ids
+    #: below this many setpoints, each goes through its drone's own ``send_setpoint`` (the object
+    #: core's path): the batch's fixed cost, a few dozen numpy calls, is more than it saves
+    SMALL = 48
+
+    def __init__(self, backend: Any, rows: SetpointRows, node_ids: np.ndarray,
+                 senders: list[Callable[[Setpoint, float], None]]) -> None:
+        self._backend, self.rows, self._ids, self._senders = backend, rows, node_ids, senders
         self.drones: list[int] = []        # fleet indices
         self.setpoints: list[Setpoint] = []
         self._template = np.zeros(len(node_ids), dtype=SETPOINT_ROW)
@@ -93,6 +98,11 @@ class SetpointBatch:
         if not ks:
             return
         self.drones, self.setpoints = [], []
+        if len(ks) < self.SMALL or not hasattr(self._backend, "setpoints"):
+            senders, times = self._senders, now.tolist()
+            for k, sp in zip(ks, sps, strict=True):
+                senders[k](sp, times[k])
+            return
         odd = self._backend.setpoints(ks, sps)
         last = self._last
         new = [j for j, (k, sp) in enumerate(zip(ks, sps, strict=True)) if sp is not last[k]]

@@ -115,7 +115,8 @@ class FleetSwarm(Swarm):
         for a in agents:
             self.setpoint_rows.appenders[a.node_id] = a.buffer_setpoints(self.setpoint_rows)
         self.batch = SetpointBatch(self.backend, self.setpoint_rows,
-                                   np.array([a.node_id for a in agents], dtype=np.int16))
+                                   np.array([a.node_id for a in agents], dtype=np.int16),
+                                   [a.send_setpoint for a in agents])
         if self.fleet_driver is not None:
             for k, agent in enumerate(agents):
                 agent.net = DroneNet(network, k + 1)

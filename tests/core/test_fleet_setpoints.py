@@ -245,3 +245,53 @@ def test_batch_setpoints_do_what_each_vehicles_setpoint_does():
     assert {("refused", "jump", None), ("refused", "nonfinite", None), ("clamped", "geofence", "POSITION"),
             ("clamped", "geofence", "VELOCITY"), ("ignored", "disarmed", None)} <= seen, seen
     assert odd_jumps[6] > 10, odd_jumps   # vehicle 6's held point, refused once the estimate jumped
+
+
+@pytest.mark.parametrize("ramp_s", [0.0, 3.0])
+def test_batch_supervision_flies_as_each_vehicles_own(ramp_s):
+    """Twin fleets take off, one supervised over arrays, the other vehicle by vehicle
+    (``batch_supervise``): every state array, ramp limit, event and supervised vehicle stays the
+    same. Some vehicles climb OFFBOARD (waiting to lift off, then on their takeoff ramp), some in
+    TAKEOFF mode, some press down on the ground until the autopilot disarms them."""
+    fleets = []
+    homes = [(5.0 * (i % 4), 5.0 * (i // 4), 0.0) for i in range(12)]
+    for batch in (True, False):
+        b = SimBackend(homes_ned_m=homes, tick_s=0.025, rng=np.random.default_rng(3), limits=TWIN_LIMITS,
+                       mpc_tko_ramp_t_s=ramp_s, preflight_disarm_s=5.0)
+        b.batch_supervise = batch
+        f = Flight(b)
+        f.run_until(lambda f=f: all(f.tel(i).ready_to_arm for i in range(12)), 30.0, "ready_to_arm")
+        fleets.append(b)
+    climbs = [Setpoint.position(n, e, -5.0) for n, e, _ in homes]
+    down = Setpoint.velocity(0.0, 0.0, 1.0)
+    seen, events = {"waiting": 0, "ramp": 0, "land": 0}, []
+    for tick in range(700):
+        for b in fleets:
+            for i, v in enumerate(b.vehicles):
+                if tick == 10 * (i % 4):   # armed at different times: ramps at different stages
+                    v.arm()
+                    if i % 3 == 0:
+                        v.takeoff(4.0)   # TAKEOFF mode: supervised vehicle by vehicle
+                elif tick == 250 + 5 * (i % 4) and i not in (2, 7):
+                    v.land()   # LAND: waits to touch down, then to disarm
+                elif 10 * (i % 4) < tick < 250 and i % 3:
+                    v.setpoint(down if i in (2, 7) else climbs[i])
+            b.step(0.025)
+        a, each = fleets
+        for x, y in zip(a.state_columns(), each.state_columns(), strict=True):
+            np.testing.assert_array_equal(x, y)
+        np.testing.assert_array_equal(a.ctrl.tko_up_m_s, each.ctrl.tko_up_m_s)
+        assert a.ctrl.ramping == each.ctrl.ramping and a._supervised == each._supervised, tick
+        mine = a.drain_events()
+        assert mine == each.drain_events(), tick
+        events.extend(mine)
+        assert [v._been_airborne for v in a.vehicles] == [v._been_airborne for v in each.vehicles]
+        for i, v in enumerate(a.vehicles):
+            if v.mode.value == "offboard" and v.armed and i in a._supervised:
+                seen["ramp" if v._been_airborne else "waiting"] += 1
+            seen["land"] += v.mode.value == "land" and v.armed
+    assert seen["waiting"] > 100 and (seen["ramp"] > 100) == (ramp_s > 0), seen   # the array path ran
+    assert seen["land"] > 1000, seen
+    assert not a._supervised and not any(v.armed for v in a.vehicles)   # all landed and disarmed
+    disarms = [e.data["reason"] for e in events if e.name == "disarmed"]
+    assert sorted(disarms) == ["landed"] * 10 + ["no takeoff"] * 2, disarms

@@ -314,11 +314,9 @@ class SimBackend(BatchSetpoints):
         order = self._supervise_order
         if order is None:
             order = self._supervise_order = sorted(self._supervised)
-        vehicles, t_s = self.vehicles, self.t_s
-        for i in order:
-            if not vehicles[i].supervise(t_s):
-                self._supervised.discard(i)
-                self._supervise_order = None
+        for i in self.supervise_many(order) if self.batch_supervise else self._supervise_each(order):
+            self._supervised.discard(i)
+            self._supervise_order = None
 
     def _judge_held(self) -> None:
         """Held velocities and accelerations near the envelope are judged again (one array test for all)."""

@@ -11,15 +11,19 @@ verdicts, commands and events are the per-vehicle call's.
 
 from __future__ import annotations
 
+import math
 from itertools import chain
 from typing import Any
 
 import numpy as np
 
-from swarmbox.api import Setpoint, SetpointKind, SetpointVerdict, Telemetry
+from swarmbox.api import FlightMode, Setpoint, SetpointKind, SetpointVerdict, Telemetry
 from swarmbox.hal.safety import SafetyLimits, reach_m
+from swarmbox.hal.sim.control import CascadedController
+from swarmbox.hal.sim.params import GRAVITY_M_S2, SimParams
 
 _POSITION = SetpointKind.POSITION
+_OFFBOARD, _LAND = FlightMode.OFFBOARD, FlightMode.LAND
 #: The array tests round differently from ``math.dist``/``math.hypot`` in the last bits: a vehicle this
 #: close (relative) to a limit is judged by the vehicle's own test.
 _MARGIN = 1e-9
@@ -34,6 +38,67 @@ class BatchSetpoints:
     _est: np.ndarray   # (3, N): the estimated positions the vehicles' checks read
     _known: _Known | None = None
     _readout: Any
+
+    #: supervise the vehicles climbing out on their takeoff ramp over arrays (False: each on its own)
+    batch_supervise = True
+    t_s: float
+    params: SimParams
+    ctrl: CascadedController
+    airborne: np.ndarray
+
+    def _supervise_each(self, order: list[int]) -> list[int]:
+        """``SimVehicle.supervise`` of each vehicle of ``order``; returns those that are done."""
+        vehicles, t_s = self.vehicles, self.t_s
+        return [i for i in order if not vehicles[i].supervise(t_s)]
+
+    def supervise_many(self, order: list[int]) -> list[int]:
+        """_supervise_each, with two common cases over arrays, after the others: an armed vehicle
+        flying OFFBOARD (waiting to lift off, or climbing on its takeoff ramp) and one landing in
+        LAND after a flight (waiting to touch down, then to disarm). Their supervision touches only
+        their own vehicle and emits nothing; one about to disarm (an event) is supervised in its
+        turn by its own ``supervise``, as before."""
+        vehicles, t_s, p = self.vehicles, self.t_s, self.params
+        ids = [i for i in order if _batched(vehicles[i])]
+        if ids:
+            arm = np.array([vehicles[i]._arm_t_s for i in ids])
+            been = np.array([vehicles[i]._been_airborne for i in ids], dtype=bool)
+            landing = np.array([vehicles[i].mode is _LAND for i in ids], dtype=bool)
+            since = [vehicles[i]._ground_since_s for i in ids]
+            down = np.array([math.nan if s is None else s for s in since])
+            landed = self.airborne[ids] == 0.0
+            disarms = np.where(landing, landed & (t_s - down >= p.land_disarm_delay_s),
+                               ~been & landed & (t_s - arm >= p.preflight_disarm_s))
+            keep = ~disarms
+            ids = np.asarray(ids)[keep].tolist()
+            arm, been, landing, down, landed = arm[keep], been[keep], landing[keep], down[keep], landed[keep]
+        own = set(ids)
+        done = [i for i in order if i not in own and not vehicles[i].supervise(t_s)]
+        if ids:
+            self._ramps(ids, arm)
+            lifted = ~been & ~landed & ~landing
+            touched = landing & landed & np.isnan(down)
+            left = landing & ~landed & ~np.isnan(down)
+            for i in np.asarray(ids)[lifted].tolist():
+                vehicles[i]._been_airborne = True
+            for i in np.asarray(ids)[touched].tolist():
+                vehicles[i]._ground_since_s = t_s
+            for i in np.asarray(ids)[left].tolist():
+                vehicles[i]._ground_since_s = None
+            ramping = np.isfinite(self.ctrl.tko_up_m_s[ids])
+            done.extend(np.asarray(ids)[~landing & (been | lifted) & ~ramping].tolist())
+        return done
+
+    def _ramps(self, ids: list[int], arm: np.ndarray) -> None:
+        """SimVehicle._ramp_takeoff of armed vehicles ``ids`` (armed at ``arm``), element-wise."""
+        p = self.params
+        since = self.t_s - arm - p.com_spoolup_time_s
+        if p.mpc_tko_ramp_t_s <= 0:
+            up = np.full(len(ids), np.inf)
+        else:
+            start = -GRAVITY_M_S2 / max(p.mpc_z_vel_p_acc, 1e-6)
+            frac = np.minimum(np.maximum(since / p.mpc_tko_ramp_t_s, 0.0), 1.0)
+            up = np.where(since < p.mpc_tko_ramp_t_s, start + frac * (p.mpc_z_vel_max_up_m_s - start), np.inf)
+        self.ctrl.set_takeoff_ramps(ids, up)
 
     def telemetry_many(self, index: list[int]) -> list[Telemetry]:
         """``vehicles[i].telemetry()`` for every ``i`` of ``index``."""
@@ -71,6 +136,13 @@ class BatchSetpoints:
         reach = reach_m(lim) * (1.0 + _MARGIN) + _MARGIN * (lim.geofence_radius_m + lim.max_alt_m)
         clear = (lim.geofence_radius_m - np.hypot(est[0], est[1]) > reach) & (lim.max_alt_m + est[2] > reach)
         return np.where(position, jump, clear)
+
+
+def _batched(v: Any) -> bool:
+    """Whether vehicle ``v``'s supervision is one of :meth:`BatchSetpoints.supervise_many`'s cases."""
+    if not v.armed or v.frozen is not None or v._braking:
+        return False
+    return v.mode is _OFFBOARD or (v.mode is _LAND and v._been_airborne)
 
 
 def _held(vehicles: list[Any], index: list[int], sps: list[Setpoint]) -> list[int]:

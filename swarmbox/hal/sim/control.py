@@ -152,6 +152,14 @@ class CascadedController:
             self._ramp_ids.discard(i)
         self.ramping = bool(self._ramp_ids)
 
+    def set_takeoff_ramps(self, ids: list[int], up_m_s: np.ndarray) -> None:
+        """``set_takeoff_ramp(i, up)`` for every ``i`` of ``ids`` and ``up`` of ``up_m_s``."""
+        self.tko_up_m_s[ids] = up_m_s
+        finite = np.isfinite(up_m_s).tolist()
+        self._ramp_ids.update(i for i, f in zip(ids, finite, strict=True) if f)
+        self._ramp_ids.difference_update(i for i, f in zip(ids, finite, strict=True) if not f)
+        self.ramping = bool(self._ramp_ids)
+
     def reset_integrator(self, i: int) -> None:
         self.integ_m_s2[:, i] = 0.0
 

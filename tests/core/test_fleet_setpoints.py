@@ -258,7 +258,7 @@ def test_batch_supervision_flies_as_each_vehicles_own(ramp_s):
     for batch in (True, False):
         b = SimBackend(homes_ned_m=homes, tick_s=0.025, rng=np.random.default_rng(3), limits=TWIN_LIMITS,
                        mpc_tko_ramp_t_s=ramp_s, preflight_disarm_s=5.0)
-        b.batch_supervise = batch
+        b.batch_supervise, b.batch_supervise_from = batch, 1
         f = Flight(b)
         f.run_until(lambda f=f: all(f.tel(i).ready_to_arm for i in range(12)), 30.0, "ready_to_arm")
         fleets.append(b)

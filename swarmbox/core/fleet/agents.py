@@ -92,12 +92,14 @@ class FleetState:
     def fetch(self, many: Callable[[list[int]], list[Telemetry]], drones: np.ndarray) -> None:
         """The telemetry records of ``drones`` (this tick's reading); ``many``: the backend's records
         of a list of vehicles (``vehicles[k].telemetry()`` of each)."""
-        todo = drones[self.fetched[drones] != self.tick_read]
-        if len(todo):
+        fetched, now = self.fetched, self.tick_read
+        todo = [k for k in drones.tolist() if fetched[k] != now] if len(drones) < 32 else (
+            drones[fetched[drones] != now].tolist())   # a few drones: no numpy calls
+        if todo:
             tels = self.tels
-            for k, tel in zip(todo.tolist(), many(todo.tolist()), strict=True):
+            for k, tel in zip(todo, many(todo), strict=True):
                 tels[k] = tel
-            self.fetched[todo] = self.tick_read
+            fetched[todo] = now
 
     def settle(self, vehicles: list[Any]) -> None:
         """Records for the drones not fetched at the last reading, with what the arrays read then
@@ -195,16 +197,20 @@ class FleetAgent(AgentNode):
     def fleet_loop(self, tel: Any, batch: SetpointBatch) -> bool:
         """The tick of a drone in a loop stage with nothing in its inbox and its watchdog quiet (the
         fleet counted it): AgentNode._stage_work with its setpoint left in ``batch``, handed over
-        after the last drone's hooks; returns ``complete``. ``tel``: its telemetry record, or for a
-        batch algorithm's drone (whose loop work reads of it only whether the vehicle is armed)
-        ``ARMED_ONLY[armed]``. The progress event comes before the setpoint here: it goes to the
-        node's log now, the vehicle's events from the setpoint after the step, as on the object core."""
+        after the last drone's hooks (in a tick of few such drones, at once); returns ``complete``.
+        ``tel``: its telemetry record, or for a batch algorithm's drone (whose loop work reads of it
+        only whether the vehicle is armed) ``ARMED_ONLY[armed]``. The progress event may come before
+        the setpoint here: it goes to the node's log now, the vehicle's events from the setpoint
+        after the step, as on the object core."""
         self._own = None
         stage = self.stage
         complete, sp = self._loop_hooks(stage, tel)
         if sp is not None:
-            batch.drones.append(self._k)
-            batch.setpoints.append(sp)
+            if batch.inline:   # a few drones this tick: its setpoint now, as on the object core
+                self.send_setpoint(sp, batch.times[self._k])
+            else:
+                batch.drones.append(self._k)
+                batch.setpoints.append(sp)
         if stage is _EXECUTION and complete != self._exec_done:
             self._note_exec(complete)
         return complete

@@ -43,7 +43,11 @@ class SetpointRows:
         self._single_rows: list[bytes] = []
 
     def one(self, node: int, row: bytes) -> None:
-        """One packed row (a drone that ticked whole): kept until the next chunk or hand-over."""
+        """One packed row (a drone's own ``send_setpoint``): straight to its log while no chunk waits
+        (no row can be ahead of it), else kept until the next chunk or hand-over."""
+        if not self._chunks:
+            self.appenders[node](row)
+            return
         self._single_nodes.append(node)
         self._single_rows.append(row)
 
@@ -79,18 +83,27 @@ class SetpointBatch:
     Each drone's row is kept between ticks (``_template``): a drone that returns the same Setpoint
     object as last tick (a hover, a held waypoint) costs an identity test, not a new row."""
 
-    #: below this many setpoints, each goes through its drone's own ``send_setpoint`` (the object
-    #: core's path): the batch's fixed cost, a few dozen numpy calls, is more than it saves
+    #: below this many hooks drones in a tick, each hands its setpoint over through its own
+    #: ``send_setpoint`` (the object core's path): the batch's fixed cost, a few dozen numpy calls,
+    #: is more than it saves
     SMALL = 48
 
-    def __init__(self, backend: Any, rows: SetpointRows, node_ids: np.ndarray,
-                 senders: list[Callable[[Setpoint, float], None]]) -> None:
-        self._backend, self.rows, self._ids, self._senders = backend, rows, node_ids, senders
+    def __init__(self, backend: Any, rows: SetpointRows, node_ids: np.ndarray) -> None:
+        self._backend, self.rows, self._ids = backend, rows, node_ids
         self.drones: list[int] = []        # fleet indices
         self.setpoints: list[Setpoint] = []
+        self.inline = True                 # this tick: each drone hands its setpoint over itself
+        self.times: list[float] = []       # ... at these clock readings (by fleet index)
         self._template = np.zeros(len(node_ids), dtype=SETPOINT_ROW)
         self._template["verdict"], self._template["reason"] = _OK, NO_TEXT
         self._last: list[Setpoint | None] = [None] * len(node_ids)   # the setpoint each row is of
+
+    def begin(self, n: int, now: np.ndarray) -> None:
+        """A tick with ``n`` drones whose hooks run (clock readings ``now``): below :attr:`SMALL`,
+        each hands its setpoint over itself, as on the object core."""
+        self.inline = n < self.SMALL or not hasattr(self._backend, "setpoints")
+        if self.inline:
+            self.times = now.tolist()
 
     def flush(self, now: np.ndarray, tick: int) -> None:
         """Hand the setpoints to the backend (the vehicles' ``setpoint``, in order) and write their rows."""
@@ -98,11 +111,6 @@ class SetpointBatch:
         if not ks:
             return
         self.drones, self.setpoints = [], []
-        if len(ks) < self.SMALL or not hasattr(self._backend, "setpoints"):
-            senders, times = self._senders, now.tolist()
-            for k, sp in zip(ks, sps, strict=True):
-                senders[k](sp, times[k])
-            return
         odd = self._backend.setpoints(ks, sps)
         last = self._last
         new = [j for j, (k, sp) in enumerate(zip(ks, sps, strict=True)) if sp is not last[k]]

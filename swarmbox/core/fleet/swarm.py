@@ -115,8 +115,7 @@ class FleetSwarm(Swarm):
         for a in agents:
             self.setpoint_rows.appenders[a.node_id] = a.buffer_setpoints(self.setpoint_rows)
         self.batch = SetpointBatch(self.backend, self.setpoint_rows,
-                                   np.array([a.node_id for a in agents], dtype=np.int16),
-                                   [a.send_setpoint for a in agents])
+                                   np.array([a.node_id for a in agents], dtype=np.int16))
         if self.fleet_driver is not None:
             for k, agent in enumerate(agents):
                 agent.net = DroneNet(network, k + 1)
@@ -247,6 +246,7 @@ class FleetSwarm(Swarm):
         net, agents, f, batch = self.network, self.agents, self.fleet, self.batch
         f.fetch(self._records, full)
         f.fetch(self._records, hooks)
+        batch.begin(len(hooks), self.now)
         try:
             if not len(full):   # the usual tick: nothing a drone sends but its Report
                 tels = f.tels
@@ -273,6 +273,7 @@ class FleetSwarm(Swarm):
             agents[k].fleet_inbound()
         self.fleet_driver.step()
         armed, whole = f.armed.tolist(), set(full.tolist())
+        batch.begin(len(hooks), self.now)
         try:
             for k in np.union1d(full, hooks).tolist():
                 if k in whole:

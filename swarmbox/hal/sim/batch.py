@@ -39,8 +39,10 @@ class BatchSetpoints:
     _known: _Known | None = None
     _readout: Any
 
-    #: supervise the vehicles climbing out on their takeoff ramp over arrays (False: each on its own)
+    #: supervise the common cases over arrays (False: each vehicle on its own) ...
     batch_supervise = True
+    #: ... from this many such vehicles on (fewer: a few dozen numpy calls cost more than they save)
+    batch_supervise_from = 64
     t_s: float
     params: SimParams
     ctrl: CascadedController
@@ -59,6 +61,8 @@ class BatchSetpoints:
         turn by its own ``supervise``, as before."""
         vehicles, t_s, p = self.vehicles, self.t_s, self.params
         ids = [i for i in order if _batched(vehicles[i])]
+        if len(ids) < self.batch_supervise_from:
+            ids = []
         if ids:
             arm = np.array([vehicles[i]._arm_t_s for i in ids])
             been = np.array([vehicles[i]._been_airborne for i in ids], dtype=bool)

@@ -214,8 +214,6 @@ def refusal(cfg: DictConfig, mission: Mission) -> str:
     r = cfg.run
     if r.runtime != "single":
         return f"run.runtime={r.runtime}"
-    if r.monitor == "on" or r.rerun:
-        return "the live monitor"
     if not hasattr(backend_class(cfg.backend), "state_into"):
         return f"backend {cfg.backend.get('name', '?')} (no fleet arrays)"
     return ""

@@ -9,12 +9,20 @@ what the dashboard shows: the snapshots' fields and the view's lines. The logs m
 
 from __future__ import annotations
 
+import json
 import re
 import time
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
+import pytest
+from pandas.testing import assert_frame_equal
+
+from swarmbox.algorithms.hover import HoverDrone
 from swarmbox.monitor.feed import GroundFeed, Snapshot, snapshot
 from swarmbox.monitor.live import Monitor
+from swarmbox.record.packed import DTYPES
 from swarmbox.record.writer import Recorder
 from swarmbox.run import build, checks
 from tests.conftest import compose_config
@@ -65,7 +73,7 @@ def fly(run_dir: Path, core: str, overrides: list[str], ticks=TICKS, rerun: bool
     monitor = Monitor("test", dashboard=False)
     monitor.feed = feed = TickFeed(ticks, monitor)
     if rerun:
-        from swarmbox.monitor.rerun_live import RerunStream   # the replay extra
+        from swarmbox.monitor.rerun_live import RerunStream  # the replay extra
 
         monitor.stream = RerunStream(str(run_dir / "live.rrd"), "test")
     recorder = Recorder(run_dir)
@@ -99,7 +107,9 @@ def shown(snap: Snapshot) -> dict:
             "forwarded": snap.forwarded, "drones": drones}
 
 
-def assert_same_dashboard(tmp_path: Path, overrides: list[str], ticks=TICKS) -> tuple[TickFeed, TickFeed]:
+def assert_same_dashboard(tmp_path: Path, overrides: list[str], ticks=TICKS,
+                          ) -> tuple[TickFeed, TickFeed, dict]:
+    """Both cores fly ``overrides``; returns their feeds and the (common) outcome."""
     obj, o = fly(tmp_path / "object", "object", overrides, ticks)
     fleet, f = fly(tmp_path / "fleet", "fleet", overrides, ticks)
     assert o == f
@@ -108,7 +118,7 @@ def assert_same_dashboard(tmp_path: Path, overrides: list[str], ticks=TICKS) -> 
         (snap_o, lines_o), (snap_f, lines_f) = obj.shown[tick], fleet.shown[tick]
         assert shown(snap_o) == shown(snap_f), tick
         assert without_disc(lines_o) == without_disc(lines_f), tick
-    return obj, fleet
+    return obj, fleet, o
 
 
 def without_disc(lines: list[str]) -> list[str]:
@@ -118,10 +128,99 @@ def without_disc(lines: list[str]) -> list[str]:
 
 
 def test_the_dashboard_of_a_lossy_jittery_run_is_the_object_cores(tmp_path):
-    obj, _ = assert_same_dashboard(tmp_path, WIFI)
+    obj, _, _ = assert_same_dashboard(tmp_path, WIFI)
     snaps = [snap for snap, _ in obj.shown.values()]
     # the case shows what it claims: measured latencies that vary, and lost Reports
     lat = {r.latency_s for s in snaps for r in s.drones if r.latency_s is not None}
     assert len(lat) > 3 and all(0.0 < x < 0.1 for x in lat)
     final = obj.shown[-1][0]
     assert any(r.received < final.tick - 10 for r in final.drones)
+
+
+def test_the_ground_rows_reach_the_monitor_in_order_and_once_across_hand_overs(tmp_path):
+    """Snapshots just before, at and after the runner's progress calls (where the fleet core hands
+    its rows over anyway): the feed is handed the ground's rows of both cores, byte for byte."""
+    obj, fleet, _ = assert_same_dashboard(tmp_path, WIFI)
+    assert len(fleet.seen) < len(obj.seen)   # the fleet core's came in chunks
+    assert b"".join(fleet.seen) == b"".join(obj.seen)
+    logged = pd.read_parquet(tmp_path / "fleet" / "logs" / "ground" / "messages.parquet")
+    rows = np.frombuffer(b"".join(fleet.seen), dtype=DTYPES["messages"])
+    assert len(rows) == len(logged) and (rows["t_s"] == logged["t_s"].to_numpy()).all()
+
+
+def test_a_monitor_coarser_than_the_tick_reads_each_drones_latest_report(tmp_path):
+    """One snapshot every 17 ticks (run.monitor_hz far below the tick rate): each hand-over holds
+    several Reports of a drone; the one the ground holds is the last."""
+    obj, fleet, _ = assert_same_dashboard(tmp_path, WIFI, ticks=range(0, 2000, 17))
+    assert b"".join(fleet.seen) == b"".join(obj.seen)
+
+
+def test_a_drone_that_crashes_leaves_the_dashboard_as_on_the_object_core(tmp_path):
+    obj, _, _ = assert_same_dashboard(tmp_path, [*WIFI, *CRASH])
+    final, lines = obj.shown[-1]
+    assert [r.drone_id for r in final.drones if not r.alive] == [1]   # the case crashed drone 1
+    assert any(re.match(r"\s+1  LOST", line) for line in lines)
+
+
+class FailsAtThreeSeconds(HoverDrone):
+    """Drone 2's hook raises 3 s into the execution: the run fails."""
+
+    def exec_loop(self, ctx):
+        if ctx.id == 2 and ctx.stage_time_s > 3.0:
+            raise ValueError("drone 2 fails on purpose")
+        return super().exec_loop(ctx)
+
+
+def test_a_run_that_fails_shows_where_it_got_to_as_on_the_object_core(tmp_path):
+    failing = [f"algo.drone._target_={__name__}.FailsAtThreeSeconds"]
+    obj, fleet, ended = assert_same_dashboard(tmp_path, failing, ticks=range(0, 2000, 13))
+    assert "drone 2 fails on purpose" in ended["outcome"] and ended["tick"] < 1000
+    assert b"".join(fleet.seen) == b"".join(obj.seen)
+
+
+def _recording(path: Path) -> list[tuple]:
+    """Every logged value of a Rerun recording: (entity, run time, component, value), sorted."""
+    rrc = pytest.importorskip("rerun.chunk", reason="needs the replay extra (Rerun)")
+    out = []
+    for chunk in rrc.RrdReader(path).store().stream():
+        batch = chunk.to_record_batch()
+        names = [n for n in batch.schema.names if n not in ("rerun.controls.RowId", "log_time")]
+        for row in batch.select(names).to_pylist():
+            when = row.pop("run_time", None)
+            out += [(chunk.entity_path, str(when), k, repr(v)) for k, v in sorted(row.items())
+                    if k != "RecordingInfo:start_time"]
+    return sorted(out)
+
+
+@pytest.mark.replay
+def test_the_rerun_stream_is_the_object_cores(tmp_path):
+    """The same snapshots streamed to Rerun (``.rrd`` files, read back): every entity and value."""
+    pytest.importorskip("rerun", reason="needs the replay extra (Rerun)")
+    overrides = [*WIFI, *CRASH, "run.proximity_m=40"]
+    fly(tmp_path / "object", "object", overrides, rerun=True)
+    fly(tmp_path / "fleet", "fleet", overrides, rerun=True)
+    obj, fleet = _recording(tmp_path / "object" / "live.rrd"), _recording(tmp_path / "fleet" / "live.rrd")
+    entities = {e for e, *_ in obj}
+    assert {"/world/drones/1", "/metrics/latency_ms/drone_1", "/world/proximity", "/events"} <= entities
+    assert obj == fleet
+
+
+def _tables(run_dir: Path) -> dict[str, pd.DataFrame]:
+    files = sorted((run_dir / "logs").rglob("*.parquet"))
+    return {str(p.relative_to(run_dir)): pd.read_parquet(p) for p in files}
+
+
+def test_the_monitor_moves_no_row_of_the_fleet_cores_logs(run):
+    """Fleet core with the monitor (snapshots a few times a tick's worth of wall time) and without,
+    and the object core with it: every table equal."""
+    fly_ = [*HOVER5, *WIFI, *CRASH, "run.progress=false"]
+    _, watched = run(*fly_, "run.core=fleet", "run.monitor=on", "run.monitor_hz=500")
+    _, plain = run(*fly_, "run.core=fleet", "run.monitor=off")
+    _, reference = run(*fly_, "run.core=object", "run.monitor=on", "run.monitor_hz=500")
+    manifest = json.loads((watched / "run.json").read_text())
+    assert manifest["monitor"]["snapshots"] > 20 and not manifest["monitor"]["error"]
+    a, b, c = _tables(watched), _tables(plain), _tables(reference)
+    assert a.keys() == b.keys() == c.keys()
+    for name in a:
+        assert_frame_equal(a[name], b[name], check_exact=True, obj=name)
+        assert_frame_equal(a[name], c[name], check_exact=True, obj=name)

@@ -51,7 +51,8 @@ class _InferiorView:
     @property
     def report(self) -> Report:
         g, k = self._g, self._k
-        return Report(0, float(g.rep_sent[k]), g.drone_ids[k], -1, int(g.rep_stage[k]), bool(g.rep_complete[k]), 1,
+        return Report(0, float(g.rep_sent[k]), g.drone_ids[k], -1, int(g.rep_stage[k]),
+                      bool(g.rep_complete[k]), 1,
                       int(g.rep_alive[k]), tuple(g.rep_pos[k].tolist()), tuple(g.rep_vel[k].tolist()), None,
                       g.rep_data[k], ())
 

@@ -173,8 +173,9 @@ class FailsAtThreeSeconds(HoverDrone):
 
 def test_a_run_that_fails_shows_where_it_got_to_as_on_the_object_core(tmp_path):
     failing = [f"algo.drone._target_={__name__}.FailsAtThreeSeconds"]
-    obj, fleet, ended = assert_same_dashboard(tmp_path, failing, ticks=range(0, 2000, 13))
-    assert "drone 2 fails on purpose" in ended["outcome"] and ended["tick"] < 1000
+    # the run fails in a tick without a snapshot: the last frame reads what the ground had then
+    obj, fleet, ended = assert_same_dashboard(tmp_path, [*WIFI, *failing], ticks=range(0, 2000, 17))
+    assert "drone 2 fails on purpose" in ended["outcome"] and ended["tick"] % 17 != 0
     assert b"".join(fleet.seen) == b"".join(obj.seen)
 
 
@@ -224,3 +225,20 @@ def test_the_monitor_moves_no_row_of_the_fleet_cores_logs(run):
     for name in a:
         assert_frame_equal(a[name], b[name], check_exact=True, obj=name)
         assert_frame_equal(a[name], c[name], check_exact=True, obj=name)
+
+
+@pytest.mark.replay
+def test_run_rerun_streams_a_fleet_core_run(run):
+    """``run.rerun`` through the runner on both cores: the same entities and the same event lines
+    (the snapshots follow the wall clock, so their times differ; every event is streamed)."""
+    pytest.importorskip("rerun", reason="needs the replay extra (Rerun)")
+    fly_ = [*HOVER5, *WIFI, *CRASH, "run.progress=false", "run.rerun=live.rrd", "run.monitor_hz=20"]
+    manifest, fleet = run(*fly_, "run.core=fleet")
+    _, obj = run(*fly_, "run.core=object")
+    assert manifest["monitor"]["rerun_frames"] >= 1
+    got, want = _recording(fleet / "live.rrd"), _recording(obj / "live.rrd")
+    assert {e for e, *_ in got} == {e for e, *_ in want}
+    def events(recording: list[tuple]) -> list[tuple]:
+        return [(t, v) for e, t, k, v in recording if e == "/events" and k == "TextLog:text"]
+
+    assert len(events(want)) > 5 and events(got) == events(want)

@@ -100,7 +100,8 @@ def shown(snap: Snapshot) -> dict:
     """What the dashboard and the stream read of a snapshot (the wall clock and the Report's own
     message id are not shown)."""
     drones = [(r.drone_id, r.alive, r.silent_ticks, r.received, r.latency_s, r.report.t_sent_s,
-               r.report.stage, r.report.pos_ned_m, r.report.vel_ned_m_s, r.report.data)
+               r.report.stage, r.report.pos_ned_m, r.report.vel_ned_m_s, r.report.discrepancy_ned_m,
+               r.report.data)
               for r in snap.drones]
     return {"t_s": snap.t_s, "tick": snap.tick, "stage": snap.stage, "stage_time_s": snap.stage_time_s,
             "reason": snap.reason, "swarm_size": snap.swarm_size, "alive": snap.alive, "prox": snap.prox,
@@ -117,14 +118,8 @@ def assert_same_dashboard(tmp_path: Path, overrides: list[str], ticks=TICKS,
     for tick in obj.shown:
         (snap_o, lines_o), (snap_f, lines_f) = obj.shown[tick], fleet.shown[tick]
         assert shown(snap_o) == shown(snap_f), tick
-        assert without_disc(lines_o) == without_disc(lines_f), tick
+        assert lines_o == lines_f, tick
     return obj, fleet, o
-
-
-def without_disc(lines: list[str]) -> list[str]:
-    """The lines without the drone rows' ``disc m`` cell: the fleet core's Reports do not carry the
-    GNSS - estimate discrepancy yet (docs/monitor.md)."""
-    return [line[:-8] if re.match(r"\s+\d+  ", line) else line for line in lines]
 
 
 def test_the_dashboard_of_a_lossy_jittery_run_is_the_object_cores(tmp_path):
@@ -133,6 +128,8 @@ def test_the_dashboard_of_a_lossy_jittery_run_is_the_object_cores(tmp_path):
     # the case shows what it claims: measured latencies that vary, and lost Reports
     lat = {r.latency_s for s in snaps for r in s.drones if r.latency_s is not None}
     assert len(lat) > 3 and all(0.0 < x < 0.1 for x in lat)
+    disc = [r.report.discrepancy_ned_m for s in snaps for r in s.drones]   # new GNSS fixes: some
+    assert any(d is None for d in disc) and any(d is not None for d in disc)
     final = obj.shown[-1][0]
     assert any(r.received < final.tick - 10 for r in final.drones)
 

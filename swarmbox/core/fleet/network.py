@@ -41,11 +41,12 @@ HEARTBEAT, REPORT = MESSAGE_TYPE_CODES[Heartbeat], MESSAGE_TYPE_CODES[Report]
 _LOSS = TEXTS.code("loss")
 #: a message in flight, as one record (``obj``: its object's key, -1 for a batch Report; ``dsti``,
 #: ``srci``: node indices; the rest of a Report's fields after ``stage``, its ``data`` text as the
-#: key of a kept object, -1 for ""). No object field: records with one copy several times slower.
+#: key of a kept object, -1 for "", ``disc`` its GNSS discrepancy, NaN for None). No object field:
+#: records with one copy several times slower.
 ITEM = np.dtype([("arrival", "f8"), ("tick", "i8"), ("order", "i8"), ("src", "i2"), ("srci", "i4"),
                  ("dst", "i2"), ("dsti", "i4"), ("msg_id", "i8"), ("mtype", "i4"), ("nbytes", "i4"),
                  ("t_sent", "f8"), ("obj", "i8"), ("stage", "i8"), ("complete", "?"), ("alive", "i4"),
-                 ("pos", "f8", (3,)), ("vel", "f8", (3,)), ("data", "i8")])
+                 ("pos", "f8", (3,)), ("vel", "f8", (3,)), ("data", "i8"), ("disc", "f8", (3,))])
 
 
 def join(parts: list[np.ndarray]) -> np.ndarray:
@@ -56,7 +57,7 @@ def join(parts: list[np.ndarray]) -> np.ndarray:
 def empty(n: int, **values: Any) -> np.ndarray:
     """Records for ``n`` messages, zero but for ``values`` (arrays, sequences or scalars)."""
     seg = np.zeros(n, dtype=ITEM)
-    seg["data"] = -1
+    seg["data"], seg["disc"] = -1, np.nan
     for name, value in values.items():
         seg[name] = value
     return seg

@@ -236,7 +236,7 @@ class FleetNetwork:
             lost = reason != NO_TEXT
             out["arrival"] = t + delay
             if lost.any():
-                self._drop(out, lost, t, tick, reason[lost])
+                self._drop(out, lost, t, reason[lost])
                 out, delay = take(out, ~lost), delay[~lost]
             self._enqueue(*impair.split(self, out, delay))
             return
@@ -250,15 +250,20 @@ class FleetNetwork:
                 lost = u[:, -1] < self.loss_prob
         out["arrival"] = t + delay
         if lost.any():
-            self._drop(out, lost, t, tick, _LOSS)
+            self._drop(out, lost, t, _LOSS)
             out = take(out, ~lost)
         self._enqueue(out)
 
-    def _drop(self, out: np.ndarray, lost: np.ndarray, t: Any, tick: int, reason: Any) -> None:
-        self.rows.block(NET_ID, {"t_s": t, "tick": tick, "kind": DROP, "msg_id": out["msg_id"][lost],
-                                 "type": out["mtype"][lost], "src": out["src"][lost], "dst": out["dst"][lost],
-                                 "nbytes": out["nbytes"][lost], "t_sent_s": out["t_sent"][lost],
-                                 "reason": reason}, int(lost.sum()))
+    def drop_rows(self, lost: np.ndarray, t: Any, reason: Any) -> None:
+        """One ``drop`` row for each record of ``lost``, stamped ``t`` (its send, or for an
+        unreachable node its arrival)."""
+        self.rows.block(NET_ID, {"t_s": t, "tick": self._time.tick, "kind": DROP, "msg_id": lost["msg_id"],
+                                 "type": lost["mtype"], "src": lost["src"], "dst": lost["dst"],
+                                 "nbytes": lost["nbytes"], "t_sent_s": lost["t_sent"], "reason": reason},
+                        len(lost))
+
+    def _drop(self, out: np.ndarray, lost: np.ndarray, t: Any, reason: Any) -> None:
+        self.drop_rows(take(out, lost), t, reason)
         self._forget(out["obj"][lost])
         self._forget(out["data"][lost])
 

@@ -126,7 +126,7 @@ class FleetSwarm(Swarm):
         """Swarm.run; the buffered message rows go to the nodes' logs before every progress call
         (where the recorder hands its buffers over) and at the end, whatever happens."""
         def hand_over(swarm: Swarm) -> None:
-            self.hand_over_rows()
+            self.rows.hand_over()
             if progress is not None:
                 progress(swarm)
 
@@ -134,12 +134,12 @@ class FleetSwarm(Swarm):
         try:
             return super().run(max_sim_time_s, speed, hand_over)
         finally:
-            self.hand_over_rows()
+            self.rows.hand_over()
             self.fleet.settle(self._vehicles)
 
     def hand_over_rows(self) -> None:
-        """Every buffered row to its node's log, now (the live monitor's snapshots call it too: each
-        node's rows keep their order whenever they are handed over)."""
+        """The buffered message rows to their nodes' logs, now: the live monitor's snapshots read the
+        ground's (each node's rows keep their order whenever they are handed over)."""
         self.rows.hand_over()
 
     def remove_agent(self, drone_id: int) -> None:

@@ -26,4 +26,4 @@ if [ -n "${1:-}" ] && [ "$before" = "$after" ]; then
   exit 0
 fi
 diff <(echo "$before") <(echo "$after") || true
-"$venv/bin/python" -m pytest -p no:cacheprovider
+"$venv/bin/python" -m pytest -p no:cacheprovider -n auto   # as the README runs them

@@ -139,7 +139,7 @@ def test_ci_extracts_exactly_the_two_commands_of_the_readme_verbatim():
     assert proc.returncode == 0, proc.stderr
     install, test = proc.stdout.splitlines()
     assert install.startswith("pip install -e '.[test]' && python -m swarmbox.run")
-    assert test.split("#")[0].split() == ["python", "-m", "pytest"]
+    assert test.split("#")[0].split() == ["python", "-m", "pytest", "-n", "auto"]   # one worker per core
     section = README.split("## Two commands", 1)[1].split("\n## ", 1)[0]
     assert f"\n{install}\n" in section and f"\n{test}\n" in section      # whole lines, unchanged
 

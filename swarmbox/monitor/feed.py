@@ -11,6 +11,12 @@ Events reach the monitor through :class:`TappedRecorder`: the event rows the nod
 log anyway (the ground's own, and the drones' when they run here) are also put on a queue. The
 ground's ``recv`` rows of Reports are read too (a few bytes of each, on the tick thread), so the
 dashboard's link latency is the analyzer's: the row's receive time - send time of the latest Report.
+
+A packed table's appender gets one row (the object core) or a chunk of whole rows, a node's rows of
+many ticks at once (the fleet core, :mod:`swarmbox.core.fleet.rows`, keeps them in column chunks and
+hands them over in time order, each row once). The sinks read every row of a chunk, in order. A swarm
+that buffers rows so (``hand_over_rows``) hands them over before each snapshot, so a snapshot sees
+every row logged up to its tick, as on the object core; that moves no row of any node's log.
 """
 
 from __future__ import annotations
@@ -22,8 +28,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from swarmbox.core.messages import GROUND_ID, MESSAGE_TYPE_CODES, DescendantState, Report
 from swarmbox.core.rows import MESSAGE_FIELDS, RECV
+from swarmbox.record.packed import DTYPES
 
 #: Event kinds worth a line on the dashboard (``progress`` and ``command`` are too chatty).
 SHOWN_KINDS = frozenset({"marker", "safety", "collision", "fault", "topology", "failsafe", "error",
@@ -43,6 +52,7 @@ def _fields(*names: str) -> struct.Struct:
 _KIND_TYPE_SRC = _fields("kind", "type", "src")
 _T_SENT = _fields("t_s", "t_sent_s")
 _REPORT = MESSAGE_TYPE_CODES[Report]
+_MESSAGE = DTYPES["messages"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -83,6 +93,8 @@ class GroundFeed:
         self.snapshot_cost_s = 0.0     # tick-thread time spent taking snapshots
         self.snapshots = 0
         self.arrivals: dict[int, bytes] = {}   # drone -> the ground's recv row of its latest Report
+        #: hands the swarm's buffered rows to the logs (and so to the sinks) before a snapshot
+        self.hand_over: Callable[[], None] | None = None
         self._next = 0.0
 
     def after_tick(self, ground: Any) -> None:
@@ -90,9 +102,15 @@ class GroundFeed:
         if now < self._next:
             return
         self._next = now + self.period_s
-        self.latest = snapshot(ground, now, arrivals=self.arrivals)
+        self.take(ground, now)
+
+    def take(self, ground: Any, wall_s: float) -> None:
+        """Take a snapshot of ``ground`` now, after every row buffered so far reached the sinks."""
+        if self.hand_over is not None:
+            self.hand_over()
+        self.latest = snapshot(ground, wall_s, arrivals=self.arrivals)
         self.snapshots += 1
-        self.snapshot_cost_s += time.perf_counter() - now
+        self.snapshot_cost_s += time.perf_counter() - wall_s
 
     def event_sink(self, node_id: int) -> Callable[[tuple], None]:
         push = self.events.append
@@ -104,9 +122,12 @@ class GroundFeed:
 
     def message_sink(self) -> Callable[[bytes], None]:
         """Keeps the ground's latest ``recv`` row of each drone's Report (packed; read when needed)."""
-        arrivals, read = self.arrivals, _KIND_TYPE_SRC.unpack_from
+        arrivals, read, size = self.arrivals, _KIND_TYPE_SRC.unpack_from, _MESSAGE.itemsize
 
         def sink(row: bytes) -> None:
+            if len(row) != size:   # a chunk of rows
+                latest_reports(row, arrivals)
+                return
             kind, mtype, src = read(row)
             if kind == RECV and mtype == _REPORT:
                 arrivals[src] = row
@@ -118,6 +139,20 @@ class GroundFeed:
         def sink(row: tuple) -> None:   # (t_s, tick, stage, name, reason)
             push((node_id, (row[0], row[1], "stage", row[3], node_id, row[4])))
         return sink
+
+
+def latest_reports(chunk: bytes, arrivals: dict[int, bytes]) -> None:
+    """The ground's packed ``messages`` rows in ``chunk``: each drone's last ``recv`` row of a Report
+    goes to ``arrivals`` (an earlier one in the same chunk is already stale)."""
+    rows = np.frombuffer(chunk, dtype=_MESSAGE)
+    hit = np.flatnonzero((rows["kind"] == RECV) & (rows["type"] == _REPORT))
+    if not len(hit):
+        return
+    src = rows["src"][hit]
+    _, from_end = np.unique(src[::-1], return_index=True)   # the first from the end: the last
+    size = _MESSAGE.itemsize
+    for i in hit[len(hit) - 1 - from_end].tolist():
+        arrivals[int(rows["src"][i])] = bytes(chunk[i * size:(i + 1) * size])
 
 
 def snapshot(ground: Any, wall_s: float, ticks_ago: int = 0, arrivals: dict[int, bytes] | None = None,

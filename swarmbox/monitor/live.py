@@ -51,7 +51,14 @@ class Monitor:
         return TappedRecorder(recorder, self.feed)
 
     def start(self, swarm: Any) -> None:
+        self.attach(swarm)
         self.watch(swarm.ground)
+
+    def attach(self, swarm: Any) -> None:
+        """The tick thread's half of :meth:`start`: the feed watches ``swarm``'s ground, and a swarm
+        that buffers its rows (the fleet core) hands them over before each snapshot."""
+        self.feed.hand_over = getattr(swarm, "hand_over_rows", None)
+        swarm.ground.observer = self.feed
 
     def watch(self, ground: Any) -> None:
         """Start watching a ground node (the whole swarm's, or a ground in its own process)."""

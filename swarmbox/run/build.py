@@ -209,32 +209,30 @@ def subscribe_peers(cfg: DictConfig, medium: Any, ids: list[int]) -> None:
 CORES = ("object", "fleet")
 
 
-def refusal(cfg: DictConfig, mission: Mission) -> str:
+def refusal(cfg: DictConfig) -> str:
     """What of ``cfg`` the fleet core does not cover yet ("" when it covers the run)."""
     r = cfg.run
     if r.runtime != "single":
         return f"run.runtime={r.runtime}"
-    if r.monitor == "on" or r.rerun:
-        return "the live monitor"
     if not hasattr(backend_class(cfg.backend), "state_into"):
         return f"backend {cfg.backend.get('name', '?')} (no fleet arrays)"
     return ""
 
 
-def check_core(cfg: DictConfig, mission: Mission) -> None:
+def check_core(cfg: DictConfig) -> None:
     """Refuse a ``run.core`` this run cannot have (a ConfigError: exit 2, nothing written)."""
     core = cfg.run.get("core", "object")
     if core not in CORES:
         raise ConfigError(f"run.core must be one of {', '.join(CORES)}, got '{core}'")
     if core == "fleet":
-        what = refusal(cfg, mission)
+        what = refusal(cfg)
         if what:
             raise ConfigError(f"run.core=fleet does not cover {what} yet; use run.core=object")
 
 
 def build_fleet_swarm(cfg: DictConfig, mission: Mission, recorder: Recorder) -> FleetSwarm:
     """build_swarm on the fleet core: the same nodes, generators and order of construction."""
-    check_core(cfg, mission)
+    check_core(cfg)
     params = typed_params(cfg.algo)
     seed = int(cfg.seed)
     timing = timing_of(cfg)

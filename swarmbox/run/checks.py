@@ -43,7 +43,7 @@ def check(cfg: DictConfig) -> Mission:
     _faults(cfg, m)
     _backend(cfg.backend)
     _algo(cfg.algo)
-    build.check_core(cfg, m)   # run.core: what the fleet core does not cover is refused here
+    build.check_core(cfg)   # run.core: what the fleet core does not cover is refused here
     return m
 
 

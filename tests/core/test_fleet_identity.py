@@ -114,7 +114,6 @@ def test_proximity_alerts_logs_equal(tmp_path):
 
 
 @pytest.mark.parametrize(("override", "what"), [
-    ("run.monitor=on", "the live monitor"),
     ("run.runtime=processes", "run.runtime=processes"),
 ])
 def test_what_the_fleet_core_does_not_cover_is_refused_before_anything_is_written(tmp_path, override, what):

@@ -51,8 +51,10 @@ class _InferiorView:
     @property
     def report(self) -> Report:
         g, k = self._g, self._k
-        return Report(0, 0.0, g.drone_ids[k], -1, int(g.rep_stage[k]), bool(g.rep_complete[k]), 1,
-                      int(g.rep_alive[k]), tuple(g.rep_pos[k].tolist()), tuple(g.rep_vel[k].tolist()), None,
+        disc = g.rep_disc[k]
+        return Report(0, float(g.rep_sent[k]), g.drone_ids[k], -1, int(g.rep_stage[k]),
+                      bool(g.rep_complete[k]), 1, int(g.rep_alive[k]), tuple(g.rep_pos[k].tolist()),
+                      tuple(g.rep_vel[k].tolist()), None if np.isnan(disc[0]) else tuple(disc.tolist()),
                       g.rep_data[k], ())
 
 
@@ -96,6 +98,8 @@ class FleetGround(GroundNode):
         self.silent, self.received = np.zeros(n, np.int64), np.zeros(n, np.int64)
         self.rep_stage, self.rep_complete = np.zeros(n, np.int64), np.zeros(n, bool)
         self.rep_alive, self.rep_t = np.zeros(n, np.int64), np.zeros(n)
+        # its send time and GNSS discrepancy (NaN: none): the live monitor's latency and ``disc m``
+        self.rep_sent, self.rep_disc = np.zeros(n), np.full((n, 3), np.nan)
         self.rep_pos, self.rep_vel = np.zeros((n, 3)), np.zeros((n, 3))
         self.rep_data = np.full(n, "", dtype=object)
         self._views: dict[str, Any] = {}
@@ -132,7 +136,8 @@ class FleetGround(GroundNode):
             texts = [self.net.text(key) for key in due["data"].tolist()]   # released, latest kept
             self.rep_data[src] = [texts[i] for i in last.tolist()]
         self.rep_pos[src], self.rep_vel[src] = due["pos"][last], due["vel"][last]
-        self.rep_t[src] = self.clock.now()
+        self.rep_t[src], self.rep_sent[src] = self.clock.now(), due["t_sent"][last]
+        self.rep_disc[src] = due["disc"][last]
 
     def _arrivals(self, k: np.ndarray, new: np.ndarray) -> None:
         """Drones joining or coming back, in hand-over order (Node.on_report's events)."""

@@ -28,8 +28,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 
 from swarmbox.core.fleet.rows import concat, take
-from swarmbox.core.messages import NET_ID
-from swarmbox.core.rows import DROP, NO_TEXT, TEXTS
+from swarmbox.core.rows import NO_TEXT, TEXTS
 
 if TYPE_CHECKING:
     from swarmbox.core.fleet.network import FleetNetwork
@@ -101,10 +100,7 @@ def arrived(net: FleetNetwork, due: np.ndarray) -> np.ndarray:
     gone = net.gone[due["dsti"]]
     if gone.any():
         lost = due[gone]
-        net.rows.block(NET_ID, {"t_s": lost["arrival"], "tick": net.time.tick, "kind": DROP,
-                                "msg_id": lost["msg_id"], "type": lost["mtype"], "src": lost["src"],
-                                "dst": lost["dst"], "nbytes": lost["nbytes"], "t_sent_s": lost["t_sent"],
-                                "reason": _UNREACHABLE}, len(lost))
+        net.drop_rows(lost, lost["arrival"], _UNREACHABLE)
         net.release(lost["obj"])
         net.release(lost["data"])
         due = take(due, ~gone)

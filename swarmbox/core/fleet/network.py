@@ -41,11 +41,12 @@ HEARTBEAT, REPORT = MESSAGE_TYPE_CODES[Heartbeat], MESSAGE_TYPE_CODES[Report]
 _LOSS = TEXTS.code("loss")
 #: a message in flight, as one record (``obj``: its object's key, -1 for a batch Report; ``dsti``,
 #: ``srci``: node indices; the rest of a Report's fields after ``stage``, its ``data`` text as the
-#: key of a kept object, -1 for ""). No object field: records with one copy several times slower.
+#: key of a kept object, -1 for "", ``disc`` its GNSS discrepancy, NaN for None). No object field:
+#: records with one copy several times slower.
 ITEM = np.dtype([("arrival", "f8"), ("tick", "i8"), ("order", "i8"), ("src", "i2"), ("srci", "i4"),
                  ("dst", "i2"), ("dsti", "i4"), ("msg_id", "i8"), ("mtype", "i4"), ("nbytes", "i4"),
                  ("t_sent", "f8"), ("obj", "i8"), ("stage", "i8"), ("complete", "?"), ("alive", "i4"),
-                 ("pos", "f8", (3,)), ("vel", "f8", (3,)), ("data", "i8")])
+                 ("pos", "f8", (3,)), ("vel", "f8", (3,)), ("data", "i8"), ("disc", "f8", (3,))])
 
 
 def join(parts: list[np.ndarray]) -> np.ndarray:
@@ -56,7 +57,7 @@ def join(parts: list[np.ndarray]) -> np.ndarray:
 def empty(n: int, **values: Any) -> np.ndarray:
     """Records for ``n`` messages, zero but for ``values`` (arrays, sequences or scalars)."""
     seg = np.zeros(n, dtype=ITEM)
-    seg["data"] = -1
+    seg["data"], seg["disc"] = -1, np.nan
     for name, value in values.items():
         seg[name] = value
     return seg
@@ -235,7 +236,7 @@ class FleetNetwork:
             lost = reason != NO_TEXT
             out["arrival"] = t + delay
             if lost.any():
-                self._drop(out, lost, t, tick, reason[lost])
+                self._drop(out, lost, t, reason[lost])
                 out, delay = take(out, ~lost), delay[~lost]
             self._enqueue(*impair.split(self, out, delay))
             return
@@ -249,15 +250,20 @@ class FleetNetwork:
                 lost = u[:, -1] < self.loss_prob
         out["arrival"] = t + delay
         if lost.any():
-            self._drop(out, lost, t, tick, _LOSS)
+            self._drop(out, lost, t, _LOSS)
             out = take(out, ~lost)
         self._enqueue(out)
 
-    def _drop(self, out: np.ndarray, lost: np.ndarray, t: Any, tick: int, reason: Any) -> None:
-        self.rows.block(NET_ID, {"t_s": t, "tick": tick, "kind": DROP, "msg_id": out["msg_id"][lost],
-                                 "type": out["mtype"][lost], "src": out["src"][lost], "dst": out["dst"][lost],
-                                 "nbytes": out["nbytes"][lost], "t_sent_s": out["t_sent"][lost],
-                                 "reason": reason}, int(lost.sum()))
+    def drop_rows(self, lost: np.ndarray, t: Any, reason: Any) -> None:
+        """One ``drop`` row for each record of ``lost``, stamped ``t`` (its send, or for an
+        unreachable node its arrival)."""
+        self.rows.block(NET_ID, {"t_s": t, "tick": self._time.tick, "kind": DROP, "msg_id": lost["msg_id"],
+                                 "type": lost["mtype"], "src": lost["src"], "dst": lost["dst"],
+                                 "nbytes": lost["nbytes"], "t_sent_s": lost["t_sent"], "reason": reason},
+                        len(lost))
+
+    def _drop(self, out: np.ndarray, lost: np.ndarray, t: Any, reason: Any) -> None:
+        self.drop_rows(take(out, lost), t, reason)
         self._forget(out["obj"][lost])
         self._forget(out["data"][lost])
 

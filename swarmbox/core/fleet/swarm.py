@@ -106,6 +106,7 @@ class FleetSwarm(Swarm):
         self._landed = np.empty(fleet.n, dtype=bool)
         self._crashed = getattr(self.backend, "crashed", None)
         self.now = np.zeros(fleet.n)
+        self._fix = np.full((3, fleet.n), np.nan)   # each drone's GNSS fix its last Report saw
         self._reports: tuple[np.ndarray, np.ndarray] | None = None   # see network.reports
         self._last_tick = 1 << 62   # the run's last tick (run sets it)
         self.live = np.ones(fleet.n, dtype=bool)   # not removed (a crash removes a drone's node)
@@ -148,6 +149,11 @@ class FleetSwarm(Swarm):
             self.rows.hand_over()
             self.setpoint_rows.hand_over()
             self.fleet.settle(self._vehicles)
+
+    def hand_over_rows(self) -> None:
+        """The buffered message rows to their nodes' logs, now: the live monitor's snapshots read the
+        ground's (each node's rows keep their order whenever they are handed over)."""
+        self.rows.hand_over()
 
     def remove_agent(self, drone_id: int) -> None:
         super().remove_agent(drone_id)
@@ -283,6 +289,14 @@ class FleetSwarm(Swarm):
         finally:
             batch.flush(self.now, self.time.tick)
 
+    def discrepancies(self) -> np.ndarray:
+        """(3, N): GNSS fix - estimate of the drones with a new fix since their last Report, NaN for
+        the others (AgentNode._publish; a fix is new when it differs: the fixes are noisy)."""
+        fix, pos = self._values[6:9], self._values[0:3]
+        new = (fix != self._fix).any(axis=0) & np.isfinite(fix).all(axis=0)
+        self._fix[:, new] = fix[:, new]
+        return np.where(new, fix - pos, np.nan)
+
     def send_reports(self) -> None:
         """Every drone's Report, from the arrays (the superiors are fixed: every drone under the ground)."""
         f = self.fleet
@@ -301,5 +315,6 @@ class FleetSwarm(Swarm):
         seg["stage"], seg["complete"] = pick(f.stage), pick(f.complete)
         seg["alive"] = pick(f.stage) != ABORT
         seg["pos"], seg["vel"] = pick(self._values[0:3]).T, pick(self._values[3:6]).T
+        seg["disc"] = pick(self.discrepancies()).T
         seg["nbytes"] = _REPORT_FIXED + np.fromiter(map(len, data), np.int32, len(agents))
         self.network.send_reports(seg, rows, data)

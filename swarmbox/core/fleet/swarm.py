@@ -134,11 +134,10 @@ class FleetSwarm(Swarm):
     # -- the loop ----------------------------------------------------------------------------------
     def run(self, max_sim_time_s: float, speed: float = 1.0,
             progress: Callable[[Swarm], None] | None = None) -> Outcome:
-        """Swarm.run; the buffered message rows go to the nodes' logs before every progress call
+        """Swarm.run; the buffered message and setpoint rows go to the nodes' logs before every progress call
         (where the recorder hands its buffers over) and at the end, whatever happens."""
         def hand_over(swarm: Swarm) -> None:
-            self.rows.hand_over()
-            self.setpoint_rows.hand_over()
+            self.hand_over_rows()
             if progress is not None:
                 progress(swarm)
 
@@ -146,14 +145,14 @@ class FleetSwarm(Swarm):
         try:
             return super().run(max_sim_time_s, speed, hand_over)
         finally:
-            self.rows.hand_over()
-            self.setpoint_rows.hand_over()
+            self.hand_over_rows()
             self.fleet.settle(self._vehicles)
 
     def hand_over_rows(self) -> None:
-        """The buffered message rows to their nodes' logs, now: the live monitor's snapshots read the
-        ground's (each node's rows keep their order whenever they are handed over)."""
+        """The buffered message and setpoint rows to their nodes' logs, now: the live monitor's
+        snapshots read the ground's (each node's rows keep their order whenever they are handed over)."""
         self.rows.hand_over()
+        self.setpoint_rows.hand_over()
 
     def remove_agent(self, drone_id: int) -> None:
         super().remove_agent(drone_id)

@@ -109,6 +109,7 @@ class FleetSwarm(Swarm):
         self._fix = np.full((3, fleet.n), np.nan)   # each drone's GNSS fix its last Report saw
         self._reports: tuple[np.ndarray, np.ndarray] | None = None   # see network.reports
         self._last_tick = 1 << 62   # the run's last tick (run sets it)
+        self._turn = 0   # in a tick, the drone whose turn it is (those before it have ticked)
         self.live = np.ones(fleet.n, dtype=bool)   # not removed (a crash removes a drone's node)
         self._all_live = True
         # every drone's setpoint rows go through one buffer; the hooks drones' setpoints in one batch
@@ -171,8 +172,13 @@ class FleetSwarm(Swarm):
         self.run_scheduled()
         self.deliver()
         self.network.phase = 0
-        self.ground.tick()
-        self.tick_drones()
+        self._turn = 0
+        try:
+            self.ground.tick()
+            self.tick_drones()
+        except Exception:
+            self.fail_midtick()
+            raise
         self.network.route()
         if self.state_log is not None:
             self.state_log(t.tick)
@@ -254,16 +260,17 @@ class FleetSwarm(Swarm):
         batch.begin(len(hooks), self.now)
         try:
             if not len(full):   # the usual tick: nothing a drone sends but its Report
-                tels = f.tels
-                f.complete[hooks] = [agents[k].fleet_loop(tels[k], batch) for k in hooks.tolist()]
+                self.loop_hooks(hooks)
                 return
             whole = set(full.tolist())
             for k in np.union1d(full, hooks).tolist():
                 net.phase = k + 1   # what this drone sends goes out after the last drone's, before its Report
+                self._turn = k
                 if k in whole:
                     agents[k].fleet_tick()
                 else:
                     f.complete[k] = agents[k].fleet_loop(f.tels[k], batch)
+            self._turn = f.n
         finally:   # a failing hook: the drones before it have handed their setpoints over
             batch.flush(self.now, self.time.tick)
 
@@ -281,12 +288,35 @@ class FleetSwarm(Swarm):
         batch.begin(len(hooks), self.now)
         try:
             for k in np.union1d(full, hooks).tolist():
+                self._turn = k
                 if k in whole:
                     agents[k].fleet_outbound()
                 else:
                     f.complete[k] = agents[k].fleet_loop(ARMED_ONLY[armed[k]], batch)
+            self._turn = f.n
         finally:
             batch.flush(self.now, self.time.tick)
+
+    def loop_hooks(self, hooks: np.ndarray) -> None:
+        """The loop hooks of ``hooks`` (drones with nothing else to do this tick), in fleet order."""
+        agents, f, batch = self.agents, self.fleet, self.batch
+        tels, done, order = f.tels, [], hooks.tolist()
+        append = done.append
+        try:   # a loop, not a comprehension: when a hook raises, the drones before it have their results
+            for k in order:
+                append(agents[k].fleet_loop(tels[k], batch))
+        finally:
+            f.complete[hooks[:len(done)]] = done
+            self._turn = order[len(done)] if len(done) < len(order) else f.n
+
+    def fail_midtick(self) -> None:
+        """A tick that fails part way (a hook raised): by then the object core had sent and routed
+        the ground's messages, and every drone before the failing one had sent its own and its Report
+        (``_turn``: the failing drone's index), so the fleet sends those Reports and routes the tick's
+        messages before the failure goes on."""
+        if not self.fleet.whole and self._turn:
+            self.send_reports(upto=self._turn)
+        self.network.route()
 
     def discrepancies(self) -> np.ndarray:
         """(3, N): GNSS fix - estimate of the drones with a new fix since their last Report, NaN for
@@ -296,14 +326,23 @@ class FleetSwarm(Swarm):
         self._fix[:, new] = fix[:, new]
         return np.where(new, fix - pos, np.nan)
 
-    def send_reports(self) -> None:
-        """Every drone's Report, from the arrays (the superiors are fixed: every drone under the ground)."""
+    def send_reports(self, upto: int | None = None) -> None:
+        """Every drone's Report, from the arrays (the superiors are fixed: every drone under the ground);
+        with ``upto``, only those of the drones before it (a tick that failed there)."""
         f = self.fleet
-        live = None if self._all_live else np.flatnonzero(self.live)   # a removed drone sends nothing
+        if upto is None:
+            live = None if self._all_live else np.flatnonzero(self.live)   # a removed drone sends nothing
+        else:
+            live = np.flatnonzero(self.live[:upto])
         agents = self.agents if live is None else [self.agents[k] for k in live.tolist()]
-        if self._reports is None:
-            self._reports = self.network.reports([a.node_id for a in agents], [a.superior for a in agents])
-        seg, rows = (x.copy() for x in self._reports)
+        if upto is not None:
+            reports = self.network.reports([a.node_id for a in agents], [a.superior for a in agents])
+        else:
+            if self._reports is None:
+                self._reports = self.network.reports([a.node_id for a in agents],
+                                                     [a.superior for a in agents])
+            reports = self._reports
+        seg, rows = (x.copy() for x in reports)
         data = list(map(DATA, agents))
         if live is None:
             f.seq += 1

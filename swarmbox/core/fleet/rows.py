@@ -32,6 +32,19 @@ def concat(parts: list[np.ndarray]) -> np.ndarray:
     return np.concatenate([p.view(raw) for p in parts]).view(dtype)
 
 
+def append_by_node(chunks: list[tuple[np.ndarray, np.ndarray]],
+                   appenders: dict[int, Callable[[bytes], None]]) -> None:
+    """Append the rows of ``chunks`` ((nodes, rows) pairs, in the order they happened) to each
+    node's log: one ``bytes`` copy per node, a node's rows in their order (a stable sort)."""
+    nodes = np.concatenate([c[0] for c in chunks])
+    rows = concat([part for _, part in chunks])
+    order = np.argsort(nodes, kind="stable")
+    nodes, rows = nodes[order], take(rows, order)
+    bounds = [0, *(np.flatnonzero(np.diff(nodes)) + 1).tolist(), len(nodes)]
+    for k, node in enumerate(nodes[bounds[:-1]].tolist()):
+        appenders[node](rows[bounds[k]:bounds[k + 1]].tobytes())
+
+
 class MessageRows:
     """Buffered ``messages`` rows of every node, handed to the nodes' logs by :meth:`hand_over`."""
 
@@ -76,12 +89,5 @@ class MessageRows:
         self._settle()
         if not self._chunks:
             return
-        nodes = np.concatenate([c[0] for c in self._chunks])
-        rows = concat([part for _, part in self._chunks])
-        self._chunks, self.rows = [], 0
-        order = np.argsort(nodes, kind="stable")
-        nodes, rows = nodes[order], take(rows, order)
-        starts = np.flatnonzero(np.diff(nodes)) + 1
-        bounds = [0, *starts.tolist(), len(nodes)]
-        for k, node in enumerate(nodes[bounds[:-1]].tolist()):
-            self._appenders[node](rows[bounds[k]:bounds[k + 1]].tobytes())
+        chunks, self._chunks, self.rows = self._chunks, [], 0
+        append_by_node(chunks, self._appenders)

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from swarmbox.api import Setpoint, SetpointKind
-from swarmbox.core.fleet.rows import concat, take
+from swarmbox.core.fleet.rows import append_by_node, take
 from swarmbox.core.rows import NO_TEXT, SETPOINT_FIELDS, TEXTS
 
 _NUMPY = {"d": "<f8", "q": "<i8", "T": "<i4"}
@@ -67,14 +67,8 @@ class SetpointRows:
         self._settle()
         if not self._chunks:
             return
-        nodes = np.concatenate([c[0] for c in self._chunks])
-        rows = concat([part for _, part in self._chunks])
-        self._chunks = []
-        order = np.argsort(nodes, kind="stable")   # a node's rows keep their order
-        nodes, rows = nodes[order], take(rows, order)
-        bounds = [0, *(np.flatnonzero(np.diff(nodes)) + 1).tolist(), len(nodes)]
-        for k, node in enumerate(nodes[bounds[:-1]].tolist()):
-            self.appenders[node](rows[bounds[k]:bounds[k + 1]].tobytes())
+        chunks, self._chunks = self._chunks, []
+        append_by_node(chunks, self.appenders)
 
 
 class SetpointBatch:
